@@ -1,0 +1,75 @@
+//! The engine's one error type. Every message names the field and the bad value.
+
+/// Errors raised by the engine. Solver non-convergence is *not* an error: it is reported in
+/// [`crate::StepReport::status`].
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A model field has an invalid value (found when compiling).
+    #[error("invalid model: `{field}` = {value}: {reason}")]
+    InvalidModel {
+        /// Dotted path of the field, e.g. `body[link].mass`.
+        field: String,
+        /// The offending value, formatted.
+        value: String,
+        /// Why it is invalid.
+        reason: String,
+    },
+    /// An array has the wrong shape.
+    #[error("shape of `{name}`: expected {expected:?}, got {got:?}")]
+    Shape {
+        /// Argument name.
+        name: String,
+        /// Expected shape.
+        expected: Vec<usize>,
+        /// Shape received.
+        got: Vec<usize>,
+    },
+    /// An input value is invalid (non-finite, out of range, unknown name...).
+    #[error("invalid input: `{field}` = {value}: {reason}")]
+    InvalidInput {
+        /// Argument or field name.
+        field: String,
+        /// The offending value, formatted.
+        value: String,
+        /// Why it is invalid.
+        reason: String,
+    },
+    /// A state was built for a different model.
+    #[error("state was built for a different model ({detail})")]
+    ModelMismatch {
+        /// What differs.
+        detail: String,
+    },
+    /// A feature is not supported.
+    #[error("unsupported: {0}")]
+    Unsupported(String),
+}
+
+/// Result alias of the engine.
+pub type Result<T> = std::result::Result<T, Error>;
+
+impl Error {
+    /// Shorthand for [`Error::InvalidModel`].
+    pub fn model(field: impl Into<String>, value: impl std::fmt::Debug, reason: impl Into<String>) -> Self {
+        Error::InvalidModel { field: field.into(), value: format!("{value:?}"), reason: reason.into() }
+    }
+    /// Shorthand for [`Error::InvalidInput`].
+    pub fn input(field: impl Into<String>, value: impl std::fmt::Debug, reason: impl Into<String>) -> Self {
+        Error::InvalidInput { field: field.into(), value: format!("{value:?}"), reason: reason.into() }
+    }
+    /// Shorthand for [`Error::Shape`].
+    pub fn shape(name: impl Into<String>, expected: &[usize], got: &[usize]) -> Self {
+        Error::Shape { name: name.into(), expected: expected.to_vec(), got: got.to_vec() }
+    }
+}
+
+/// `ensure!(cond, err)`: return `Err(err)` unless `cond` holds (one-line checks, as `polars_ensure!`).
+#[macro_export]
+macro_rules! ensure {
+    ($cond:expr, $err:expr) => {
+        if !$cond {
+            return Err($err);
+        }
+    };
+}

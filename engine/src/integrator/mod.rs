@@ -1,0 +1,2 @@
+//! Time discretisation: the variational integrator of Dojo §III-D.
+pub mod variational;

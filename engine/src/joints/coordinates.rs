@@ -1,0 +1,119 @@
+//! Minimal ↔ maximal coordinates (MuJoCo's `qpos`/`qvel` conventions).
+//!
+//! `qpos` of a joint is its free translations (components of the anchor displacement along the
+//! free axes, parent joint frame) followed by its rotation coordinates: a hinge angle, two
+//! universal angles, or a quaternion `(w, x, y, z)` for ball rotations. A `floating` joint is
+//! MuJoCo's free joint: `[x, y, z, qw, qx, qy, qz]` of the child body frame in the parent frame.
+//! `qvel` is the free translation rates followed by the relative angular velocity through the
+//! motion subspace (child frame for ball rotations, as in MuJoCo). Velocities map linearly
+//! through rigid-body kinematics, so min → max → min is exact.
+use nalgebra::Vector3;
+
+use super::geometry::{JointFrame, Pose, joint_angvel, joint_rotation};
+use crate::math::quat;
+use crate::model::Model;
+use crate::state::State;
+use crate::{Error, Result, ensure};
+
+fn pose_of(state: &State, b: usize) -> Pose {
+    if b == 0 { Pose::world() } else { state.pose(b) }
+}
+
+fn velocity_of(state: &State, b: usize) -> [f64; 6] {
+    let (v, w) = if b == 0 { (Vector3::zeros(), Vector3::zeros()) } else { state.velocity(b) };
+    [v[0], v[1], v[2], w[0], w[1], w[2]]
+}
+
+/// Write `qpos` (length `model.nq`) of `state`.
+pub fn qpos_into(model: &Model, state: &State, out: &mut [f64]) {
+    for j in model.joints.iter().filter(|j| !j.is_loop) {
+        let frame = JointFrame::new(j, &pose_of(state, j.parent), &pose_of(state, j.child));
+        frame.coordinates(j, &mut out[j.qpos_adr..j.qpos_adr + j.nq()]);
+    }
+}
+
+/// Write `qvel` (length `model.nv`) of `state`.
+pub fn qvel_into(model: &Model, state: &State, out: &mut [f64]) {
+    let mut jac = [0.0; 6 * 12];
+    for j in model.joints.iter().filter(|j| !j.is_loop) {
+        let frame = JointFrame::new(j, &pose_of(state, j.parent), &pose_of(state, j.child));
+        let nf = j.nfree();
+        frame.free_jacobian(j, &mut jac[..12 * nf]);
+        let (vp, vc) = (velocity_of(state, j.parent), velocity_of(state, j.child));
+        for r in 0..nf {
+            let row = &jac[12 * r..12 * r + 12];
+            let dot: f64 = (0..6).map(|i| row[i] * vp[i] + row[6 + i] * vc[i]).sum();
+            out[j.qvel_adr + r] = dot;
+        }
+    }
+}
+
+/// `qpos` of `state`.
+pub fn qpos(model: &Model, state: &State) -> Vec<f64> {
+    let mut q = vec![0.0; model.nq];
+    qpos_into(model, state, &mut q);
+    q
+}
+
+/// `qvel` of `state`.
+pub fn qvel(model: &Model, state: &State) -> Vec<f64> {
+    let mut v = vec![0.0; model.nv];
+    qvel_into(model, state, &mut v);
+    v
+}
+
+/// Check `qpos`/`qvel` lengths, finiteness and quaternion norms.
+pub fn validate_minimal(model: &Model, qpos: &[f64], qvel: &[f64]) -> Result<()> {
+    ensure!(qpos.len() == model.nq, Error::shape("qpos", &[model.nq], &[qpos.len()]));
+    ensure!(qvel.len() == model.nv, Error::shape("qvel", &[model.nv], &[qvel.len()]));
+    if let Some(i) = qpos.iter().position(|x| !x.is_finite()) {
+        return Err(Error::input(format!("qpos[{i}]"), qpos[i], "must be finite"));
+    }
+    if let Some(i) = qvel.iter().position(|x| !x.is_finite()) {
+        return Err(Error::input(format!("qvel[{i}]"), qvel[i], "must be finite"));
+    }
+    for j in model.joints.iter().filter(|j| !j.is_loop && j.rot.nq() == 4) {
+        let a = j.qpos_adr + j.ntrans;
+        let n = qpos[a..a + 4].iter().map(|x| x * x).sum::<f64>().sqrt();
+        ensure!(n > 1e-9, Error::input(format!("qpos[{a}..{}] (joint {})", a + 4, j.name), &qpos[a..a + 4], "quaternion must be non-zero"));
+    }
+    Ok(())
+}
+
+/// Set body poses and velocities of `state` from minimal coordinates by forward kinematics.
+/// Quaternions in `qpos` are normalised. Loop joints are not enforced here: `qpos` must be
+/// consistent with them (the solver then keeps them closed).
+pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64]) -> Result<()> {
+    validate_minimal(model, qpos, qvel)?;
+    for &ji in &model.topology.fk_order {
+        let j = &model.joints[ji];
+        let parent = pose_of(state, j.parent);
+        let q = &qpos[j.qpos_adr..j.qpos_adr + j.nq()];
+        let qd = &qvel[j.qvel_adr..j.qvel_adr + j.nfree()];
+        let qj = joint_rotation(&j.rot, &q[j.ntrans..]);
+        let rot_p = quat::rotation(&parent.quat);
+        let rot_pj = rot_p * quat::rotation(&j.offset);
+        let child_quat = (parent.quat * j.offset * qj).normalize();
+        let rot_c = quat::rotation(&child_quat);
+        let free = j.trans_basis.columns(0, j.ntrans);
+        let delta = free * nalgebra::DVector::from_column_slice(&q[..j.ntrans]);
+        let delta = Vector3::new(delta[0], delta[1], delta[2]);
+        let a_p = parent.pos + rot_p * j.parent_anchor;
+        let a_c = a_p + rot_pj * delta;
+        let child = Pose { pos: a_c - rot_c * j.child_anchor, quat: child_quat };
+        state.set_pose(j.child, &child);
+        // velocities: ω_c = R_jᵀ R_offᵀ ω_p + S qvel_rot;  ȧ_c = ȧ_p + R_pj Δ̇ + ω_p × (R_pj Δ)
+        let vp = velocity_of(state, j.parent);
+        let (v_p, w_p) = (Vector3::new(vp[0], vp[1], vp[2]), Vector3::new(vp[3], vp[4], vp[5]));
+        let rot_j = quat::rotation(&qj);
+        let w_c = rot_j.transpose() * quat::rotation(&j.offset).transpose() * w_p + joint_angvel(&j.rot, &qj, &qd[j.ntrans..]);
+        let ddelta = free * nalgebra::DVector::from_column_slice(&qd[..j.ntrans]);
+        let ddelta = Vector3::new(ddelta[0], ddelta[1], ddelta[2]);
+        let w_pw = rot_p * w_p;
+        let adot_p = v_p + w_pw.cross(&(rot_p * j.parent_anchor));
+        let adot_c = adot_p + rot_pj * ddelta + w_pw.cross(&(rot_pj * delta));
+        let v_c = adot_c - (rot_c * w_c).cross(&(rot_c * j.child_anchor));
+        state.set_velocity(j.child, &v_c, &w_c);
+    }
+    Ok(())
+}

@@ -1,0 +1,252 @@
+//! Joint geometry at one configuration: constraint values and Jacobians (the `k` of Dojo eq. 13
+//! and its map `K`), and the free-coordinate Jacobian used by springs, dampers and inputs.
+//!
+//! Perturbations of a body are `(δp, δφ)`: world-frame translation of its COM and body-frame
+//! rotation `q ⊗ [1, δφ/2]`. Jacobians have 12 columns: parent `(δp, δφ)`, child `(δp, δφ)`.
+use nalgebra::{Matrix3, Matrix3x4, SMatrix, Vector3};
+
+use super::{Joint, RotDofs};
+use crate::math::quat::{self, Quat};
+use crate::math::spatial::skew;
+
+/// Pose of a body's centre of mass: world position and orientation.
+#[derive(Clone, Copy, Debug)]
+pub struct Pose {
+    /// COM position, world frame (m).
+    pub pos: Vector3<f64>,
+    /// Orientation, body to world.
+    pub quat: Quat,
+}
+
+impl Pose {
+    /// The world frame.
+    pub fn world() -> Self {
+        Pose { pos: Vector3::zeros(), quat: quat::identity() }
+    }
+}
+
+/// Row-major `rows × 12` Jacobian block writer.
+type Row12 = SMatrix<f64, 1, 12>;
+
+/// Everything a joint needs at one configuration of its two bodies.
+pub struct JointFrame {
+    rot_p: Matrix3<f64>,
+    rot_c: Matrix3<f64>,
+    rot_off: Matrix3<f64>,
+    /// Parent joint frame to world: `R(q_parent ⊗ offset)`.
+    rot_pj: Matrix3<f64>,
+    /// Relative rotation `q_joint = offset† ⊗ q_parent† ⊗ q_child`.
+    qj: Quat,
+    rot_j: Matrix3<f64>,
+    /// Anchor displacement in the parent joint frame, `Δ = R_pjᵀ (a_child - a_parent)`.
+    delta: Vector3<f64>,
+}
+
+impl JointFrame {
+    /// Evaluate at the given parent and child COM poses.
+    pub fn new(joint: &Joint, parent: &Pose, child: &Pose) -> Self {
+        let rot_p = quat::rotation(&parent.quat);
+        let rot_c = quat::rotation(&child.quat);
+        let rot_off = quat::rotation(&joint.offset);
+        let rot_pj = rot_p * rot_off;
+        let qj = quat::conj(&joint.offset) * quat::conj(&parent.quat) * child.quat;
+        let a_p = parent.pos + rot_p * joint.parent_anchor;
+        let a_c = child.pos + rot_c * joint.child_anchor;
+        let delta = rot_pj.transpose() * (a_c - a_p);
+        JointFrame { rot_p, rot_c, rot_off, rot_pj, rot_j: quat::rotation(&qj), qj, delta }
+    }
+
+    /// `∂Δ/∂(δp_p, δφ_p, δp_c, δφ_c)`, 3 × 12.
+    fn delta_jacobian(&self, joint: &Joint) -> SMatrix<f64, 3, 12> {
+        let t = self.rot_pj.transpose();
+        let mut m = SMatrix::<f64, 3, 12>::zeros();
+        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-t));
+        // δΔ = R_pjᵀ R_p skew(r_p) δφ_p + skew(Δ) R_offᵀ δφ_p   (anchor arm and frame rotation)
+        let dp = t * self.rot_p * skew(&joint.parent_anchor) + skew(&self.delta) * self.rot_off.transpose();
+        m.fixed_view_mut::<3, 3>(0, 3).copy_from(&dp);
+        m.fixed_view_mut::<3, 3>(0, 6).copy_from(&t);
+        m.fixed_view_mut::<3, 3>(0, 9).copy_from(&(-t * self.rot_c * skew(&joint.child_anchor)));
+        m
+    }
+
+    /// `∂q_joint/∂δφ` for the parent and child (4 × 3 each, wxyz rows).
+    fn qj_jacobians(&self) -> (nalgebra::Matrix4x3<f64>, nalgebra::Matrix4x3<f64>) {
+        // child: q_j ⊗ [0, δφ/2];  parent: [0, -R_offᵀ δφ/2] ⊗ q_j
+        let g_c = quat::lmat(&self.qj) * quat::vt() * 0.5;
+        let g_p = -quat::rmat(&self.qj) * quat::vt() * self.rot_off.transpose() * 0.5;
+        (g_p, g_c)
+    }
+
+    /// Constraint values `k` (length `joint.ncon()`): constrained translations, then rotations.
+    pub fn constraint(&self, joint: &Joint, out: &mut [f64]) {
+        let t = joint.trans_basis.transpose() * self.delta;
+        let mut r = 0;
+        for i in joint.ntrans..3 {
+            out[r] = t[i];
+            r += 1;
+        }
+        let v = quat::vec(&self.qj);
+        match &joint.rot {
+            RotDofs::Locked => out[r..r + 3].copy_from_slice(v.as_slice()),
+            RotDofs::Hinge { perp, .. } => {
+                out[r] = perp[0].dot(&v);
+                out[r + 1] = perp[1].dot(&v);
+            }
+            RotDofs::Universal { a1, a2 } => out[r] = a1.dot(&(self.rot_j * a2)),
+            RotDofs::Ball => {}
+        }
+    }
+
+    /// Constraint Jacobian `∂k/∂(δp_p, δφ_p, δp_c, δφ_c)`, row-major `ncon × 12`.
+    pub fn constraint_jacobian(&self, joint: &Joint, out: &mut [f64]) {
+        let dt = joint.trans_basis.transpose() * self.delta_jacobian(joint);
+        let mut r = 0;
+        for i in joint.ntrans..3 {
+            out[12 * r..12 * r + 12].copy_from_slice(dt.row(i).transpose().as_slice());
+            r += 1;
+        }
+        let (g_p, g_c) = self.qj_jacobians();
+        let vmat: Matrix3x4<f64> = quat::v();
+        let mut put = |r: usize, p: Vector3<f64>, c: Vector3<f64>| {
+            let row = &mut out[12 * r..12 * r + 12];
+            row.fill(0.0);
+            row[3..6].copy_from_slice(p.as_slice());
+            row[9..12].copy_from_slice(c.as_slice());
+        };
+        match &joint.rot {
+            RotDofs::Locked => {
+                let (jp, jc) = (vmat * g_p, vmat * g_c);
+                for i in 0..3 {
+                    put(r + i, jp.row(i).transpose(), jc.row(i).transpose());
+                }
+            }
+            RotDofs::Hinge { perp, .. } => {
+                let (jp, jc) = (vmat * g_p, vmat * g_c);
+                for (i, e) in perp.iter().enumerate() {
+                    put(r + i, jp.transpose() * e, jc.transpose() * e);
+                }
+            }
+            RotDofs::Universal { a1, a2 } => {
+                // k = a1ᵀ R_j a2: child δk = -a1ᵀ R_j skew(a2) δφ_c; parent δk = (a1 × R_j a2)ᵀ R_offᵀ δφ_p
+                let c = -(self.rot_j.transpose() * a1).transpose() * skew(a2);
+                let p = self.rot_off * a1.cross(&(self.rot_j * a2));
+                put(r, p, c.transpose());
+            }
+            RotDofs::Ball => {}
+        }
+    }
+
+    /// Free-coordinate Jacobian `∂qvel/∂(v_p, ω_p, v_c, ω_c)`, row-major `nfree × 12`
+    /// (velocities as perturbation rates: world COM velocity, body-frame angular velocity).
+    ///
+    /// Translations are exact derivatives of the free components of `Δ`. Rotations map the relative
+    /// angular velocity in the child frame, `ω_rel = ω_c - R_jᵀ R_offᵀ ω_p`, through the pseudo-inverse
+    /// of the joint's motion subspace `S` (`ω_rel = S qvel_rot`).
+    pub fn free_jacobian(&self, joint: &Joint, out: &mut [f64]) {
+        let dt = joint.trans_basis.transpose() * self.delta_jacobian(joint);
+        for i in 0..joint.ntrans {
+            out[12 * i..12 * i + 12].copy_from_slice(dt.row(i).transpose().as_slice());
+        }
+        let to_child = self.rot_j.transpose() * self.rot_off.transpose();
+        let mut r = joint.ntrans;
+        let mut put = |s: Vector3<f64>| {
+            let mut row = Row12::zeros();
+            let p = -(to_child.transpose() * s);
+            row.fixed_view_mut::<1, 3>(0, 3).copy_from(&p.transpose());
+            row.fixed_view_mut::<1, 3>(0, 9).copy_from(&s.transpose());
+            out[12 * r..12 * r + 12].copy_from_slice(row.as_slice());
+            r += 1;
+        };
+        for s in self.motion_subspace(&joint.rot).iter().flatten() {
+            put(*s);
+        }
+    }
+
+    /// Columns of the rotational motion subspace `S` (child frame), at most three.
+    fn motion_subspace(&self, rot: &RotDofs) -> [Option<Vector3<f64>>; 3] {
+        match rot {
+            RotDofs::Locked => [None, None, None],
+            RotDofs::Hinge { axis, .. } => [Some(*axis), None, None],
+            RotDofs::Universal { a1, a2 } => [Some(self.rot_j.transpose() * a1), Some(*a2), None],
+            RotDofs::Ball => [Some(Vector3::x()), Some(Vector3::y()), Some(Vector3::z())],
+        }
+    }
+
+    /// Minimal position coordinates (length `joint.nq()`): free translations, then rotation
+    /// coordinates (angles in (-π, π], or the quaternion `q_joint` for a ball).
+    pub fn coordinates(&self, joint: &Joint, out: &mut [f64]) {
+        let t = joint.trans_basis.transpose() * self.delta;
+        out[..joint.ntrans].copy_from_slice(&t.as_slice()[..joint.ntrans]);
+        let r = &mut out[joint.ntrans..];
+        match &joint.rot {
+            RotDofs::Locked => {}
+            RotDofs::Hinge { axis, .. } => {
+                let (w, s) = (self.qj.w, axis.dot(&quat::vec(&self.qj)));
+                let (w, s) = if w < 0.0 { (-w, -s) } else { (w, s) };
+                r[0] = 2.0 * s.atan2(w);
+            }
+            RotDofs::Universal { a1, a2 } => {
+                let a3 = a1.cross(a2);
+                let ra2 = self.rot_j * a2;
+                let rta1 = self.rot_j.transpose() * a1;
+                r[0] = a3.dot(&ra2).atan2(a2.dot(&ra2));
+                r[1] = a3.dot(&rta1).atan2(a1.dot(&rta1));
+            }
+            RotDofs::Ball => r[..4].copy_from_slice(quat::wxyz(&self.qj).as_slice()),
+        }
+    }
+
+    /// Generalized spring force per free dof, `-k (θ - θ_ref)` (ball: `-k ⊙ rotvec(q_ref† ⊗ q_j)`).
+    pub fn spring_force(&self, joint: &Joint, coords: &[f64], out: &mut [f64]) {
+        let nt = joint.ntrans;
+        for i in 0..nt {
+            out[i] = -joint.stiffness[i] * (coords[i] - joint.spring_ref[i]);
+        }
+        match &joint.rot {
+            RotDofs::Ball => {
+                let qref = quat::from_wxyz(&joint.spring_ref[nt..nt + 4]);
+                let rv = quat::rotation_vector(&(quat::conj(&qref) * self.qj));
+                for i in 0..3 {
+                    out[nt + i] = -joint.stiffness[nt + i] * rv[i];
+                }
+            }
+            rot => {
+                for i in nt..nt + rot.nfree() {
+                    out[i] = -joint.stiffness[i] * wrap_angle(coords[i] - joint.spring_ref[i]);
+                }
+            }
+        }
+    }
+
+    /// Parent joint frame to world rotation.
+    pub fn rot_pj(&self) -> &Matrix3<f64> {
+        &self.rot_pj
+    }
+}
+
+/// Wrap an angle difference to (-π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let two_pi = std::f64::consts::TAU;
+    let w = a - two_pi * (a / two_pi).round();
+    if w <= -std::f64::consts::PI { w + two_pi } else { w }
+}
+
+/// Joint rotation `q_joint` from rotational coordinates (inverse of [`JointFrame::coordinates`]).
+pub fn joint_rotation(rot: &RotDofs, q: &[f64]) -> Quat {
+    match rot {
+        RotDofs::Locked => quat::identity(),
+        RotDofs::Hinge { axis, .. } => quat::axis_angle(axis, q[0]),
+        RotDofs::Universal { a1, a2 } => quat::axis_angle(a1, q[0]) * quat::axis_angle(a2, q[1]),
+        RotDofs::Ball => quat::from_wxyz(&q[..4]).normalize(),
+    }
+}
+
+/// Relative angular velocity of the child in its own frame from rotational velocity coordinates.
+pub fn joint_angvel(rot: &RotDofs, qj: &Quat, qd: &[f64]) -> Vector3<f64> {
+    match rot {
+        RotDofs::Locked => Vector3::zeros(),
+        RotDofs::Hinge { axis, .. } => axis * qd[0],
+        RotDofs::Universal { a1, a2 } => quat::rotation(qj).transpose() * a1 * qd[0] + a2 * qd[1],
+        RotDofs::Ball => Vector3::new(qd[0], qd[1], qd[2]),
+    }
+}

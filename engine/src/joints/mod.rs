@@ -1,0 +1,125 @@
+//! Joints as constraints between a parent and a child body (Dojo §III-C, eqs. 13-15).
+//!
+//! A joint has a translational part (0-3 free axes of the anchor displacement, expressed in the
+//! parent's joint frame) and a rotational part (0-3 free rotations of the child relative to its
+//! reference orientation). The constrained directions become impulse unknowns of the Newton solve;
+//! the free directions are the joint's minimal coordinates (`qpos`, `qvel`), on which springs,
+//! dampers and inputs act. The sixteen combinations are the [`JointKind`] variants.
+pub mod coordinates;
+pub mod geometry;
+mod kind;
+
+pub use kind::JointKind;
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::math::quat::Quat;
+
+/// Free rotational degrees of freedom of a joint, axes in the joint frame (the child's reference
+/// frame). `q_child = q_parent ⊗ offset ⊗ q_joint`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RotDofs {
+    /// No relative rotation: 3 constraint rows `V q_joint = 0`.
+    Locked,
+    /// One hinge about `axis`; 2 constraint rows `[b c]ᵀ V q_joint = 0` (b, c ⟂ axis).
+    Hinge {
+        /// Rotation axis (unit).
+        axis: Vector3<f64>,
+        /// The two unit axes perpendicular to `axis` (constrained directions).
+        perp: [Vector3<f64>; 2],
+    },
+    /// Two hinges in sequence (a Cardan/universal joint): `q_joint = q(a1, θ1) ⊗ q(a2, θ2)`,
+    /// `a1 ⟂ a2`; one constraint row `a1ᵀ R(q_joint) a2 = 0`.
+    Universal {
+        /// First axis (attached to the parent side).
+        a1: Vector3<f64>,
+        /// Second axis (attached to the child).
+        a2: Vector3<f64>,
+    },
+    /// Free rotation, coordinates a unit quaternion (MuJoCo's ball joint), no constraint row.
+    Ball,
+}
+
+impl RotDofs {
+    /// Number of free rotational velocity coordinates.
+    pub fn nfree(&self) -> usize {
+        match self {
+            RotDofs::Locked => 0,
+            RotDofs::Hinge { .. } => 1,
+            RotDofs::Universal { .. } => 2,
+            RotDofs::Ball => 3,
+        }
+    }
+    /// Number of rotational position coordinates (4 for a quaternion).
+    pub fn nq(&self) -> usize {
+        match self {
+            RotDofs::Ball => 4,
+            other => other.nfree(),
+        }
+    }
+    /// Number of rotational constraint rows.
+    pub fn ncon(&self) -> usize {
+        3 - self.nfree()
+    }
+}
+
+/// A compiled joint. Anchors are in the bodies' centre-of-mass frames (metres); the world's
+/// "frame" is the world itself.
+#[derive(Clone, Debug)]
+pub struct Joint {
+    /// Unique name.
+    pub name: String,
+    /// Kind (one of sixteen).
+    pub kind: JointKind,
+    /// Parent body index (0 = world).
+    pub parent: usize,
+    /// Child body index (0 = world, allowed for loop joints only).
+    pub child: usize,
+    /// Anchor in the parent's COM frame.
+    pub parent_anchor: Vector3<f64>,
+    /// Anchor in the child's COM frame.
+    pub child_anchor: Vector3<f64>,
+    /// Child orientation relative to the parent at zero rotational coordinates.
+    pub offset: Quat,
+    /// Columns: translational axes in the joint frame; the first `ntrans` are free.
+    pub trans_basis: Matrix3<f64>,
+    /// Number of free translational axes.
+    pub ntrans: usize,
+    /// Free rotations.
+    pub rot: RotDofs,
+    /// Closes a kinematic loop: not part of the spanning tree, has no `qpos`/`qvel`.
+    pub is_loop: bool,
+    /// Spring stiffness per free dof (N/m or N·m/rad).
+    pub stiffness: Vec<f64>,
+    /// Damping per free dof (N·s/m or N·m·s/rad).
+    pub damping: Vec<f64>,
+    /// Spring rest position in `qpos` units (a quaternion for ball rotations).
+    pub spring_ref: Vec<f64>,
+    /// First index in `qpos` (tree joints only).
+    pub qpos_adr: usize,
+    /// First index in `qvel` (tree joints only).
+    pub qvel_adr: usize,
+}
+
+impl Joint {
+    /// Free dofs = velocity coordinates.
+    pub fn nfree(&self) -> usize {
+        self.ntrans + self.rot.nfree()
+    }
+    /// Position coordinates.
+    pub fn nq(&self) -> usize {
+        self.ntrans + self.rot.nq()
+    }
+    /// Constraint rows (impulse unknowns).
+    pub fn ncon(&self) -> usize {
+        (3 - self.ntrans) + self.rot.ncon()
+    }
+    /// Whether any spring acts.
+    pub fn has_spring(&self) -> bool {
+        self.stiffness.iter().any(|&k| k != 0.0)
+    }
+    /// Whether any damper acts.
+    pub fn has_damper(&self) -> bool {
+        self.damping.iter().any(|&d| d != 0.0)
+    }
+}

@@ -1,0 +1,3 @@
+//! Small fixed-size geometry: quaternions (Dojo Appendix A) and spatial helpers.
+pub mod quat;
+pub mod spatial;

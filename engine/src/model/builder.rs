@@ -1,0 +1,465 @@
+//! Model construction and validation: [`ModelBuilder::compile`] is the only way to a [`Model`].
+use nalgebra::{Matrix3, Vector3};
+
+use super::{Actuator, Body, Model, Options, Topology};
+use crate::joints::geometry::{JointFrame, Pose};
+use crate::joints::{Joint, JointKind, RotDofs};
+use crate::math::quat;
+use crate::{Error, Result, ensure};
+
+/// A rigid body to add. Positions and orientation are the body frame's world pose at the
+/// reference configuration.
+#[derive(Clone, Debug)]
+pub struct BodySpec {
+    /// Unique name.
+    pub name: String,
+    /// Mass (kg), > 0.
+    pub mass: f64,
+    /// Inertia about the COM, body frame (kg·m²): symmetric positive definite.
+    pub inertia: Matrix3<f64>,
+    /// COM in the body frame (m). Default 0.
+    pub com: Vector3<f64>,
+    /// Body frame origin, world (m).
+    pub pos: Vector3<f64>,
+    /// Body orientation `(w, x, y, z)`, unit.
+    pub quat: [f64; 4],
+}
+
+impl BodySpec {
+    /// A body with principal moments `inertia` (kg·m²) at the origin.
+    pub fn new(name: &str, mass: f64, inertia: [f64; 3]) -> Self {
+        BodySpec {
+            name: name.to_string(),
+            mass,
+            inertia: Matrix3::from_diagonal(&Vector3::from(inertia)),
+            com: Vector3::zeros(),
+            pos: Vector3::zeros(),
+            quat: [1.0, 0.0, 0.0, 0.0],
+        }
+    }
+    /// Full 3×3 inertia about the COM, body frame.
+    pub fn inertia_matrix(mut self, inertia: Matrix3<f64>) -> Self {
+        self.inertia = inertia;
+        self
+    }
+    /// Reference position of the body frame (m).
+    pub fn pos(mut self, pos: [f64; 3]) -> Self {
+        self.pos = Vector3::from(pos);
+        self
+    }
+    /// Reference orientation `(w, x, y, z)`.
+    pub fn quat(mut self, quat: [f64; 4]) -> Self {
+        self.quat = quat;
+        self
+    }
+    /// COM offset in the body frame (m).
+    pub fn com(mut self, com: [f64; 3]) -> Self {
+        self.com = Vector3::from(com);
+        self
+    }
+}
+
+/// A joint to add. Anchors are in the parent's and child's body frames (for the world: world
+/// coordinates); `axis` is in the child's body frame (MuJoCo's convention).
+#[derive(Clone, Debug)]
+pub struct JointSpec {
+    /// Unique name.
+    pub name: String,
+    /// Kind.
+    pub kind: JointKind,
+    /// Parent body name (`"world"` for the ground).
+    pub parent: String,
+    /// Child body name.
+    pub child: String,
+    /// Joint axis, child body frame; normalised at compile. Default z.
+    pub axis: Vector3<f64>,
+    /// Anchor in the parent body frame (m).
+    pub parent_anchor: Vector3<f64>,
+    /// Anchor in the child body frame (m).
+    pub child_anchor: Vector3<f64>,
+    /// Stiffness: one value for every free dof, or one per dof.
+    pub stiffness: Vec<f64>,
+    /// Damping: one value for every free dof, or one per dof.
+    pub damping: Vec<f64>,
+    /// Spring rest position in `qpos` units (default: the reference configuration).
+    pub spring_ref: Option<Vec<f64>>,
+    /// Per free dof `(lower, upper)` limits.
+    pub range: Option<Vec<(f64, f64)>>,
+    /// This joint closes a kinematic loop (it is not part of the spanning tree).
+    pub is_loop: bool,
+}
+
+impl JointSpec {
+    /// A joint of `kind` between `parent` and `child` with axis z and anchors at the body origins.
+    pub fn new(name: &str, kind: JointKind, parent: &str, child: &str) -> Self {
+        JointSpec {
+            name: name.to_string(),
+            kind,
+            parent: parent.to_string(),
+            child: child.to_string(),
+            axis: Vector3::z(),
+            parent_anchor: Vector3::zeros(),
+            child_anchor: Vector3::zeros(),
+            stiffness: vec![0.0],
+            damping: vec![0.0],
+            spring_ref: None,
+            range: None,
+            is_loop: false,
+        }
+    }
+    /// Axis in the child body frame.
+    pub fn axis(mut self, axis: [f64; 3]) -> Self {
+        self.axis = Vector3::from(axis);
+        self
+    }
+    /// Anchors in the parent and child body frames.
+    pub fn anchors(mut self, parent: [f64; 3], child: [f64; 3]) -> Self {
+        self.parent_anchor = Vector3::from(parent);
+        self.child_anchor = Vector3::from(child);
+        self
+    }
+    /// Spring stiffness (all free dofs).
+    pub fn stiffness(mut self, k: f64) -> Self {
+        self.stiffness = vec![k];
+        self
+    }
+    /// Damping (all free dofs).
+    pub fn damping(mut self, d: f64) -> Self {
+        self.damping = vec![d];
+        self
+    }
+    /// Spring rest position in `qpos` units.
+    pub fn spring_ref(mut self, q: Vec<f64>) -> Self {
+        self.spring_ref = Some(q);
+        self
+    }
+    /// Mark as loop-closing.
+    pub fn closing_loop(mut self) -> Self {
+        self.is_loop = true;
+        self
+    }
+}
+
+/// An actuator to add: force `gear · ctrl` on free dof `dof` of `joint`.
+#[derive(Clone, Debug)]
+pub struct ActuatorSpec {
+    /// Unique name.
+    pub name: String,
+    /// Joint name.
+    pub joint: String,
+    /// Free dof of the joint (0-based).
+    pub dof: usize,
+    /// Gear ratio.
+    pub gear: f64,
+    /// Control clamp.
+    pub ctrlrange: Option<(f64, f64)>,
+}
+
+/// Builds and validates a [`Model`].
+#[derive(Clone, Debug, Default)]
+pub struct ModelBuilder {
+    /// Options (time step, gravity, solver).
+    pub options: Options,
+    bodies: Vec<BodySpec>,
+    joints: Vec<JointSpec>,
+    actuators: Vec<ActuatorSpec>,
+}
+
+impl ModelBuilder {
+    /// Empty builder with default options.
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Set the time step (s).
+    pub fn timestep(mut self, h: f64) -> Self {
+        self.options.timestep = h;
+        self
+    }
+    /// Set gravity (m/s²).
+    pub fn gravity(mut self, g: [f64; 3]) -> Self {
+        self.options.gravity = Vector3::from(g);
+        self
+    }
+    /// Add a body (fluent).
+    pub fn body(mut self, b: BodySpec) -> Self {
+        self.bodies.push(b);
+        self
+    }
+    /// Add a joint (fluent).
+    pub fn joint(mut self, j: JointSpec) -> Self {
+        self.joints.push(j);
+        self
+    }
+    /// Add an actuator (fluent).
+    pub fn actuator(mut self, a: ActuatorSpec) -> Self {
+        self.actuators.push(a);
+        self
+    }
+    /// Add a body.
+    pub fn add_body(&mut self, b: BodySpec) {
+        self.bodies.push(b);
+    }
+    /// Add a joint.
+    pub fn add_joint(&mut self, j: JointSpec) {
+        self.joints.push(j);
+    }
+    /// Add an actuator.
+    pub fn add_actuator(&mut self, a: ActuatorSpec) {
+        self.actuators.push(a);
+    }
+
+    /// Validate everything and compile the immutable model.
+    pub fn compile(&self) -> Result<Model> {
+        self.options.validate()?;
+        let bodies = self.compile_bodies()?;
+        let names: Vec<&str> = bodies.iter().map(|b| b.name.as_str()).collect();
+        let mut joints = Vec::with_capacity(self.joints.len());
+        for (i, spec) in self.joints.iter().enumerate() {
+            ensure!(
+                !self.joints[..i].iter().any(|o| o.name == spec.name),
+                Error::model(format!("joint[{}].name", spec.name), &spec.name, "duplicate joint name")
+            );
+            joints.push(compile_joint(spec, &names, &bodies)?);
+        }
+        let parent_joint = spanning_tree(&bodies, &joints)?;
+        assign_addresses(&mut joints);
+        let topology = Topology::new(bodies.len(), &joints, &parent_joint)
+            .map_err(|e| Error::model("joints", "graph", e))?;
+        let actuators = self.compile_actuators(&joints)?;
+        let nq = joints.iter().filter(|j| !j.is_loop).map(Joint::nq).sum();
+        let nv = joints.iter().filter(|j| !j.is_loop).map(Joint::nfree).sum();
+        let mut model = Model { options: self.options.clone(), bodies, joints, actuators, nq, nv, qpos0: vec![], topology };
+        let reference = crate::State::reference(&model);
+        model.qpos0 = crate::joints::coordinates::qpos(&model, &reference);
+        for j in 0..model.joints.len() {
+            if model.joints[j].spring_ref.is_empty() {
+                let frame = joint_frame_at_reference(&model.joints[j], &model.bodies);
+                let mut c = vec![0.0; model.joints[j].nq()];
+                frame.coordinates(&model.joints[j], &mut c);
+                model.joints[j].spring_ref = c;
+            }
+        }
+        Ok(model)
+    }
+
+    fn compile_bodies(&self) -> Result<Vec<Body>> {
+        let world = Body {
+            name: "world".into(),
+            mass: 0.0,
+            inertia: Matrix3::zeros(),
+            com: Vector3::zeros(),
+            ref_pose: Pose::world(),
+        };
+        let mut out = vec![world];
+        for spec in &self.bodies {
+            let f = |field: &str| format!("body[{}].{field}", spec.name);
+            ensure!(!spec.name.is_empty(), Error::model("body.name", "", "must not be empty"));
+            ensure!(
+                !out.iter().any(|b| b.name == spec.name),
+                Error::model(f("name"), &spec.name, "duplicate body name (\"world\" is reserved)")
+            );
+            ensure!(spec.mass.is_finite() && spec.mass > 0.0, Error::model(f("mass"), spec.mass, "must be finite and > 0"));
+            check_inertia(&spec.inertia, &f("inertia"))?;
+            check_finite(spec.pos.as_slice(), &f("pos"))?;
+            check_finite(spec.com.as_slice(), &f("com"))?;
+            check_unit_quat(&spec.quat, &f("quat"))?;
+            let q = quat::from_wxyz(&spec.quat);
+            out.push(Body {
+                name: spec.name.clone(),
+                mass: spec.mass,
+                inertia: spec.inertia,
+                com: spec.com,
+                ref_pose: Pose { pos: spec.pos + quat::rotation(&q) * spec.com, quat: q },
+            });
+        }
+        Ok(out)
+    }
+
+    fn compile_actuators(&self, joints: &[Joint]) -> Result<Vec<Actuator>> {
+        let mut out: Vec<Actuator> = Vec::new();
+        for spec in &self.actuators {
+            let f = |field: &str| format!("actuator[{}].{field}", spec.name);
+            ensure!(!out.iter().any(|a| a.name == spec.name), Error::model(f("name"), &spec.name, "duplicate actuator name"));
+            let joint = joints
+                .iter()
+                .position(|j| j.name == spec.joint)
+                .ok_or_else(|| Error::model(f("joint"), &spec.joint, "unknown joint"))?;
+            let nfree = joints[joint].nfree();
+            ensure!(spec.dof < nfree, Error::model(f("dof"), spec.dof, format!("joint has {nfree} free dofs")));
+            ensure!(spec.gear.is_finite(), Error::model(f("gear"), spec.gear, "must be finite"));
+            if let Some((lo, hi)) = spec.ctrlrange {
+                ensure!(lo.is_finite() && hi.is_finite() && lo < hi, Error::model(f("ctrlrange"), (lo, hi), "need finite lower < upper"));
+            }
+            out.push(Actuator { name: spec.name.clone(), joint, dof: spec.dof, gear: spec.gear, ctrlrange: spec.ctrlrange });
+        }
+        Ok(out)
+    }
+}
+
+fn check_finite(v: &[f64], field: &str) -> Result<()> {
+    ensure!(v.iter().all(|x| x.is_finite()), Error::model(field, v, "must be finite"));
+    Ok(())
+}
+
+fn check_unit_quat(q: &[f64; 4], field: &str) -> Result<()> {
+    check_finite(q, field)?;
+    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+    ensure!((n - 1.0).abs() <= 1e-6, Error::model(field, q, format!("quaternion must have unit norm (norm {n})")));
+    Ok(())
+}
+
+fn check_inertia(m: &Matrix3<f64>, field: &str) -> Result<()> {
+    let rows: Vec<[f64; 3]> = (0..3).map(|i| [m[(i, 0)], m[(i, 1)], m[(i, 2)]]).collect();
+    check_finite(m.as_slice(), field)?;
+    let scale = m.abs().max().max(1e-300);
+    ensure!((m - m.transpose()).abs().max() <= 1e-9 * scale, Error::model(field, &rows, "inertia must be symmetric"));
+    let eig = m.symmetric_eigenvalues();
+    ensure!(eig.iter().all(|&e| e > 0.0), Error::model(field, &rows, format!("inertia must be positive definite (eigenvalues {:?})", eig.as_slice())));
+    let (a, b, c) = (eig[0], eig[1], eig[2]);
+    let tol = 1e-9 * (a + b + c);
+    ensure!(
+        a + b + tol >= c && a + c + tol >= b && b + c + tol >= a,
+        Error::model(field, &rows, format!("principal moments {:?} violate the triangle inequality A + B >= C", eig.as_slice()))
+    );
+    Ok(())
+}
+
+fn broadcast(v: &[f64], n: usize, field: &str) -> Result<Vec<f64>> {
+    check_finite(v, field)?;
+    ensure!(v.iter().all(|&x| x >= 0.0), Error::model(field, v, "must be >= 0"));
+    match v.len() {
+        1 => Ok(vec![v[0]; n]),
+        len if len == n => Ok(v.to_vec()),
+        _ => Err(Error::model(field, v, format!("need 1 or {n} values (one per free dof)"))),
+    }
+}
+
+fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Joint> {
+    let f = |field: &str| format!("joint[{}].{field}", spec.name);
+    ensure!(!spec.name.is_empty(), Error::model("joint.name", "", "must not be empty"));
+    let find = |name: &str, field: &str| {
+        names.iter().position(|n| *n == name).ok_or_else(|| Error::model(f(field), name, "unknown body"))
+    };
+    let (parent, child) = (find(&spec.parent, "parent")?, find(&spec.child, "child")?);
+    ensure!(parent != child, Error::model(f("child"), &spec.child, "parent and child must differ"));
+    ensure!(child != 0 || spec.is_loop, Error::model(f("child"), &spec.child, "the world can be a child only of a loop joint"));
+    check_finite(spec.axis.as_slice(), &f("axis"))?;
+    let norm = spec.axis.norm();
+    ensure!(norm > 1e-9, Error::model(f("axis"), spec.axis.as_slice(), "axis must have non-zero length"));
+    check_finite(spec.parent_anchor.as_slice(), &f("parent_anchor"))?;
+    check_finite(spec.child_anchor.as_slice(), &f("child_anchor"))?;
+    if spec.range.is_some() {
+        return Err(Error::Unsupported(format!(
+            "joint[{}].range: joint limits are solved by the interior-point contact solver (issue #3)",
+            spec.name
+        )));
+    }
+    let (pb, cb) = (&bodies[parent], &bodies[child]);
+    // The axis is given in the child body frame; the joint frame is the child's reference frame,
+    // which has the same orientation, so the axis is used as is.
+    let (trans_basis, rot) = spec.kind.frame(&(spec.axis / norm));
+    let floating = spec.kind == JointKind::Floating;
+    // Floating joints (MuJoCo's free joint) measure the child body frame's pose in the parent
+    // body frame: no orientation offset, anchors at the body frame origins.
+    let (pa, ca) = if floating { (Vector3::zeros(), Vector3::zeros()) } else { (spec.parent_anchor, spec.child_anchor) };
+    let offset = if floating { quat::identity() } else { quat::conj(&pb.ref_pose.quat) * cb.ref_pose.quat };
+    let nfree = spec.kind.ntrans() + spec.kind.nrot();
+    let mut joint = Joint {
+        name: spec.name.clone(),
+        kind: spec.kind,
+        parent,
+        child,
+        parent_anchor: pa - pb.com,
+        child_anchor: ca - cb.com,
+        offset,
+        trans_basis,
+        ntrans: spec.kind.ntrans(),
+        rot,
+        is_loop: spec.is_loop,
+        stiffness: broadcast(&spec.stiffness, nfree, &f("stiffness"))?,
+        damping: broadcast(&spec.damping, nfree, &f("damping"))?,
+        spring_ref: vec![],
+        qpos_adr: 0,
+        qvel_adr: 0,
+    };
+    if let Some(r) = &spec.spring_ref {
+        check_finite(r, &f("spring_ref"))?;
+        ensure!(r.len() == joint.nq(), Error::model(f("spring_ref"), r, format!("need {} values (qpos of the joint)", joint.nq())));
+        let mut r = r.clone();
+        if matches!(joint.rot, RotDofs::Ball) {
+            let q = &mut r[joint.ntrans..];
+            let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+            ensure!(n > 1e-9, Error::model(f("spring_ref"), &r, "rest quaternion must be non-zero"));
+            q.iter_mut().for_each(|x| *x /= n);
+        }
+        joint.spring_ref = r;
+    }
+    // The anchors must coincide along every constrained direction at the reference pose.
+    let mut k = vec![0.0; joint.ncon()];
+    joint_frame_at_reference(&joint, bodies).constraint(&joint, &mut k);
+    let gap = k.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    ensure!(
+        gap <= 1e-6,
+        Error::model(
+            f("anchors"),
+            (spec.parent_anchor.as_slice(), spec.child_anchor.as_slice()),
+            format!("constraint violated by {gap:.3e} at the reference pose: anchors or body poses disagree")
+        )
+    );
+    Ok(joint)
+}
+
+fn joint_frame_at_reference(joint: &Joint, bodies: &[Body]) -> JointFrame {
+    JointFrame::new(joint, &bodies[joint.parent].ref_pose, &bodies[joint.child].ref_pose)
+}
+
+/// Each moving body must be the child of exactly one tree joint, and following parent joints
+/// from any body must reach the world.
+fn spanning_tree(bodies: &[Body], joints: &[Joint]) -> Result<Vec<Option<usize>>> {
+    let mut parent_joint: Vec<Option<usize>> = vec![None; bodies.len()];
+    for (j, joint) in joints.iter().enumerate().filter(|(_, j)| !j.is_loop) {
+        if let Some(other) = parent_joint[joint.child] {
+            return Err(Error::model(
+                format!("joint[{}].child", joint.name),
+                &bodies[joint.child].name,
+                format!("body is already the child of joint '{}'; declare one of them as a loop joint", joints[other].name),
+            ));
+        }
+        parent_joint[joint.child] = Some(j);
+    }
+    for (b, body) in bodies.iter().enumerate().skip(1) {
+        ensure!(
+            parent_joint[b].is_some(),
+            Error::model(
+                format!("body[{}]", body.name),
+                &body.name,
+                "body has no joint: add a 'floating' joint to make it free or a 'fixed' joint to weld it"
+            )
+        );
+    }
+    for b in 1..bodies.len() {
+        // walk up: more than nbody steps means a cycle
+        let (mut cur, mut steps, mut path) = (b, 0, Vec::new());
+        while cur != 0 {
+            let j = parent_joint[cur].unwrap_or(0);
+            path.push(joints[j].name.clone());
+            cur = joints[j].parent;
+            steps += 1;
+            ensure!(
+                steps <= bodies.len(),
+                Error::model("joints", &path[path.len().saturating_sub(bodies.len())..], "these joints form a cycle that is not declared as a loop (set loop=True on one)")
+            );
+        }
+    }
+    Ok(parent_joint)
+}
+
+fn assign_addresses(joints: &mut [Joint]) {
+    let (mut qa, mut va) = (0, 0);
+    for j in joints.iter_mut().filter(|j| !j.is_loop) {
+        j.qpos_adr = qa;
+        j.qvel_adr = va;
+        qa += j.nq();
+        va += j.nfree();
+    }
+}

@@ -1,0 +1,107 @@
+//! The model: compiled once by [`ModelBuilder::compile`], then immutable (MuJoCo's `mjModel`,
+//! Drake's finalized plant). Per-rollout data lives in [`crate::State`].
+mod builder;
+mod options;
+mod topology;
+
+pub use builder::{ActuatorSpec, BodySpec, JointSpec, ModelBuilder};
+pub use options::Options;
+pub(crate) use topology::Topology;
+pub(crate) use topology::body_node as topology_body_node;
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::joints::Joint;
+use crate::joints::geometry::Pose;
+
+/// A rigid body. Body 0 is the world.
+#[derive(Clone, Debug)]
+pub struct Body {
+    /// Unique name (`"world"` for body 0).
+    pub name: String,
+    /// Mass (kg); 0 for the world.
+    pub mass: f64,
+    /// Inertia about the COM in the body frame (kg·m²), symmetric positive definite.
+    pub inertia: Matrix3<f64>,
+    /// COM position in the body frame (m).
+    pub com: Vector3<f64>,
+    /// COM pose at the reference configuration.
+    pub ref_pose: Pose,
+}
+
+/// An actuator: a generalized force `gear · clamp(ctrl)` on one free dof of a joint.
+#[derive(Clone, Debug)]
+pub struct Actuator {
+    /// Unique name.
+    pub name: String,
+    /// Joint index.
+    pub joint: usize,
+    /// Free dof of that joint (0-based, in its `qvel` order).
+    pub dof: usize,
+    /// Gear ratio.
+    pub gear: f64,
+    /// Control clamp, if any.
+    pub ctrlrange: Option<(f64, f64)>,
+}
+
+/// Compiled, immutable model.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// Options (time step, gravity, solver settings).
+    pub options: Options,
+    /// Bodies, world first.
+    pub bodies: Vec<Body>,
+    /// Joints, in declaration order (`qpos`/`qvel` follow it; loop joints have none).
+    pub joints: Vec<Joint>,
+    /// Actuators, in declaration order (`ctrl` follows it).
+    pub actuators: Vec<Actuator>,
+    /// Number of position coordinates.
+    pub nq: usize,
+    /// Number of velocity coordinates.
+    pub nv: usize,
+    /// `qpos` of the reference configuration.
+    pub qpos0: Vec<f64>,
+    pub(crate) topology: Topology,
+}
+
+impl Model {
+    /// Number of bodies including the world.
+    pub fn nbody(&self) -> usize {
+        self.bodies.len()
+    }
+    /// Number of joints (tree and loop).
+    pub fn njoint(&self) -> usize {
+        self.joints.len()
+    }
+    /// Number of actuators (length of `ctrl`).
+    pub fn nu(&self) -> usize {
+        self.actuators.len()
+    }
+    /// Total number of joint constraint rows (joint impulse unknowns).
+    pub fn ncon(&self) -> usize {
+        self.topology.ncon
+    }
+    /// Time step (s).
+    pub fn timestep(&self) -> f64 {
+        self.options.timestep
+    }
+    /// Index of a body by name.
+    pub fn body_id(&self, name: &str) -> Option<usize> {
+        self.bodies.iter().position(|b| b.name == name)
+    }
+    /// Index of a joint by name.
+    pub fn joint_id(&self, name: &str) -> Option<usize> {
+        self.joints.iter().position(|j| j.name == name)
+    }
+    /// The same model with other options (validated). Topology and parameters are shared.
+    pub fn with_options(&self, options: Options) -> crate::Result<Model> {
+        options.validate()?;
+        let mut m = self.clone();
+        m.options = options;
+        Ok(m)
+    }
+    /// Identifier of the topology; a [`crate::State`] remembers it.
+    pub fn topology_id(&self) -> u64 {
+        self.topology.id
+    }
+}

@@ -1,0 +1,56 @@
+//! Simulation and solver options, with documented defaults.
+use nalgebra::Vector3;
+
+/// Options of a model. Change them with [`crate::Model::with_options`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    /// Time step `h` (s). Default 0.01.
+    pub timestep: f64,
+    /// Gravity, world frame (m/s²). Default `(0, 0, -9.81)`.
+    pub gravity: Vector3<f64>,
+    /// Residual tolerance: the solve has converged when the ∞-norm of every residual row
+    /// (momentum rows in N·s, constraint rows in m or quaternion units) is below it. Default 1e-10.
+    pub rtol: f64,
+    /// Maximum Newton iterations per step. Default 30.
+    pub max_iter: usize,
+    /// Maximum backtracking halvings per Newton iteration. Default 10.
+    pub max_ls: usize,
+    /// Regularisation `ε` on constraint pivots, `-ε I`: keeps redundant constraints of closed
+    /// loops (a planar four-bar in 3-D) solvable without changing the solution. Default 1e-12.
+    pub regularization: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            timestep: 0.01,
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+            rtol: 1e-10,
+            max_iter: 30,
+            max_ls: 10,
+            regularization: 1e-12,
+        }
+    }
+}
+
+impl Options {
+    /// Check every field; errors name the field and value.
+    pub fn validate(&self) -> crate::Result<()> {
+        use crate::{Error, ensure};
+        ensure!(
+            self.timestep.is_finite() && self.timestep > 0.0,
+            Error::model("timestep", self.timestep, "must be finite and > 0")
+        );
+        ensure!(
+            self.gravity.iter().all(|g| g.is_finite()),
+            Error::model("gravity", self.gravity.as_slice(), "must be finite")
+        );
+        ensure!(self.rtol.is_finite() && self.rtol > 0.0, Error::model("rtol", self.rtol, "must be finite and > 0"));
+        ensure!(self.max_iter >= 1, Error::model("max_iter", self.max_iter, "must be >= 1"));
+        ensure!(
+            self.regularization.is_finite() && self.regularization >= 0.0,
+            Error::model("regularization", self.regularization, "must be finite and >= 0")
+        );
+        Ok(())
+    }
+}

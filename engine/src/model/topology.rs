@@ -1,0 +1,184 @@
+//! Mechanism graph (Dojo Fig. 3): bodies and joints are nodes; the block pattern of the Newton
+//! matrix and its elimination order are fixed when the model is compiled.
+//!
+//! Elimination order: post-order over the spanning tree in which each body hangs below its parent
+//! joint and each joint below its parent body, so every joint is eliminated after the subtree it
+//! carries (its pivot is then the negative-definite Schur complement `-K M⁻¹ Kᵀ`); loop-closing
+//! joints come last. Trees have no fill-in; loops fill in along their cycle only.
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::joints::Joint;
+use crate::solver::graph_ldu::BlockPattern;
+
+static NEXT_ID: AtomicU64 = AtomicU64::new(1);
+
+/// Offsets of one joint's blocks in the Newton matrix arena.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct JointBlocks {
+    /// (joint row, parent col) and (parent row, joint col).
+    pub jp: Option<(usize, usize)>,
+    /// (joint row, child col) and (child row, joint col).
+    pub jc: Option<(usize, usize)>,
+    /// (parent row, child col) and (child row, parent col): damper coupling.
+    pub pc: Option<(usize, usize)>,
+}
+
+/// Everything about connectivity, decided at compile time.
+#[derive(Clone, Debug)]
+pub(crate) struct Topology {
+    pub id: u64,
+    /// Tree joints, each after the joint of its parent body.
+    pub fk_order: Vec<usize>,
+    /// First row of each joint in the impulse vector.
+    pub con_adr: Vec<usize>,
+    /// Total constraint rows.
+    pub ncon: usize,
+    pub pattern: BlockPattern,
+    /// Graph node of each joint with constraint rows.
+    pub joint_node: Vec<Option<usize>>,
+    /// Diagonal block offset of each moving body (index by body; world unused).
+    pub body_diag: Vec<usize>,
+    /// Diagonal block offset of each joint node.
+    pub joint_diag: Vec<Option<usize>>,
+    pub blocks: Vec<JointBlocks>,
+}
+
+/// Graph node of a moving body.
+pub(crate) fn body_node(b: usize) -> Option<usize> {
+    b.checked_sub(1)
+}
+
+impl Topology {
+    /// Build the graph; `parent_joint[b]` is the tree joint whose child is `b` (`None` for world).
+    pub fn new(nbody: usize, joints: &[Joint], parent_joint: &[Option<usize>]) -> Result<Self, String> {
+        let nmoving = nbody - 1;
+        let mut dims = vec![6; nmoving];
+        let mut joint_node = vec![None; joints.len()];
+        let mut con_adr = Vec::with_capacity(joints.len());
+        let mut ncon = 0;
+        for (j, joint) in joints.iter().enumerate() {
+            con_adr.push(ncon);
+            ncon += joint.ncon();
+            if joint.ncon() > 0 {
+                joint_node[j] = Some(dims.len());
+                dims.push(joint.ncon());
+            }
+        }
+        let mut edges = Vec::new();
+        for (j, joint) in joints.iter().enumerate() {
+            let (p, c) = (body_node(joint.parent), body_node(joint.child));
+            if let Some(jn) = joint_node[j] {
+                edges.extend(p.map(|p| (jn, p)));
+                edges.extend(c.map(|c| (jn, c)));
+            }
+            if let (Some(p), Some(c), true) = (p, c, joint.has_damper()) {
+                edges.push((p, c));
+            }
+        }
+        let order = elimination_order(nmoving, joints, parent_joint, &joint_node, dims.len());
+        let pattern = BlockPattern::new(&dims, &edges, &order)?;
+        let blk = |i: usize, j: usize| -> Option<(usize, usize)> { Some((pattern.block(i, j)?, pattern.block(j, i)?)) };
+        let blocks = joints
+            .iter()
+            .enumerate()
+            .map(|(j, joint)| {
+                let (p, c) = (body_node(joint.parent), body_node(joint.child));
+                let jn = joint_node[j];
+                JointBlocks {
+                    jp: jn.zip(p).and_then(|(jn, p)| blk(jn, p)),
+                    jc: jn.zip(c).and_then(|(jn, c)| blk(jn, c)),
+                    pc: if joint.has_damper() { p.zip(c).and_then(|(p, c)| blk(p, c)) } else { None },
+                }
+            })
+            .collect();
+        let body_diag = (0..nbody).map(|b| body_node(b).and_then(|n| pattern.block(n, n)).unwrap_or(0)).collect();
+        let joint_diag = joint_node.iter().map(|n| n.and_then(|n| pattern.block(n, n))).collect();
+        let fk_order = fk_order(joints, parent_joint);
+        Ok(Topology {
+            id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
+            fk_order,
+            con_adr,
+            ncon,
+            pattern,
+            joint_node,
+            body_diag,
+            joint_diag,
+            blocks,
+        })
+    }
+}
+
+/// Tree joints ordered so that a body's parent joint precedes the joints of its children.
+fn fk_order(joints: &[Joint], parent_joint: &[Option<usize>]) -> Vec<usize> {
+    let mut order = Vec::new();
+    let mut done = vec![false; joints.len()];
+    fn visit(j: usize, joints: &[Joint], pj: &[Option<usize>], done: &mut [bool], order: &mut Vec<usize>) {
+        if done[j] {
+            return;
+        }
+        done[j] = true;
+        if let Some(up) = pj[joints[j].parent] {
+            visit(up, joints, pj, done, order);
+        }
+        order.push(j);
+    }
+    for (j, joint) in joints.iter().enumerate() {
+        if !joint.is_loop {
+            visit(j, joints, parent_joint, &mut done, &mut order);
+        }
+    }
+    order
+}
+
+/// Post-order of the node tree (children before parents), loop joints last.
+fn elimination_order(
+    nmoving: usize,
+    joints: &[Joint],
+    parent_joint: &[Option<usize>],
+    joint_node: &[Option<usize>],
+    nnodes: usize,
+) -> Vec<usize> {
+    // parent node of every node in the elimination tree (None = root)
+    let mut up: Vec<Option<usize>> = vec![None; nnodes];
+    for b in 1..=nmoving {
+        if let Some(j) = parent_joint[b] {
+            up[b - 1] = joint_node[j].or_else(|| body_node(joints[j].parent));
+        }
+    }
+    let mut loops = Vec::new();
+    for (j, joint) in joints.iter().enumerate() {
+        if let Some(n) = joint_node[j] {
+            if joint.is_loop {
+                loops.push(n);
+            } else {
+                up[n] = body_node(joint.parent);
+            }
+        }
+    }
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); nnodes];
+    let mut roots = Vec::new();
+    for n in 0..nnodes {
+        if loops.contains(&n) {
+            continue;
+        }
+        match up[n] {
+            Some(p) => children[p].push(n),
+            None => roots.push(n),
+        }
+    }
+    let mut order = Vec::with_capacity(nnodes);
+    // iterative post-order DFS (deep chains must not overflow the stack)
+    for r in roots {
+        let mut stack = vec![(r, 0usize)];
+        while let Some((n, i)) = stack.pop() {
+            if i < children[n].len() {
+                stack.push((n, i + 1));
+                stack.push((children[n][i], 0));
+            } else {
+                order.push(n);
+            }
+        }
+    }
+    order.extend(loops);
+    order
+}

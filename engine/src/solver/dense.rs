@@ -1,0 +1,333 @@
+//! Small dense kernels on row-major `f64` slices, used by the block-sparse solver.
+//!
+//! Matrices are stored row-major: entry `(r, c)` of an `m × n` matrix lives at `r * n + c`.
+//! None of these functions allocate; they are meant for the small blocks (dimension 1..=6
+//! typically) of the multibody Newton matrix. The LU factorisation uses partial (row)
+//! pivoting and stores its pivots LAPACK-style: at step `c`, row `c` was swapped with
+//! row `piv[c] >= c`, so that `P A = L U` with `L` unit lower triangular.
+
+/// In-place LU factorisation with partial pivoting of the `n × n` row-major matrix `a`.
+///
+/// On return `a` holds `L` (strictly below the diagonal, unit diagonal implied) and `U`
+/// (on and above the diagonal), and `piv[c]` is the row swapped with row `c` at step `c`.
+/// Returns `false` (leaving `a` partially factored) if a pivot is exactly zero or not finite.
+pub fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> bool {
+    debug_assert!(a.len() >= n * n && piv.len() >= n);
+    for c in 0..n {
+        let p = pivot_row(a, n, c);
+        let pivot = a[p * n + c];
+        if pivot == 0.0 || !pivot.is_finite() {
+            return false;
+        }
+        piv[c] = p;
+        swap_rows(a, n, c, p);
+        let (top, bottom) = a.split_at_mut((c + 1) * n);
+        let row_c = &top[c * n..];
+        for row_r in bottom[..(n - c - 1) * n].chunks_exact_mut(n) {
+            // l_rc = a_rc / u_cc;  a_r,c+1.. -= l_rc * u_c,c+1..
+            let l = row_r[c] / pivot;
+            row_r[c] = l;
+            axpy_neg(&mut row_r[c + 1..], l, &row_c[c + 1..n]);
+        }
+    }
+    true
+}
+
+/// Row index `>= c` of the largest `|a[r][c]|` (a NaN entry is always selected).
+fn pivot_row(a: &[f64], n: usize, c: usize) -> usize {
+    let mut best = c;
+    let mut best_abs = a[c * n + c].abs();
+    for r in c + 1..n {
+        let v = a[r * n + c].abs();
+        if v > best_abs || v.is_nan() {
+            best = r;
+            best_abs = v;
+        }
+    }
+    best
+}
+
+/// Swap rows `i` and `j` (each `ncols` long) of a row-major matrix.
+fn swap_rows(a: &mut [f64], ncols: usize, i: usize, j: usize) {
+    if i == j {
+        return;
+    }
+    let (lo, hi) = (i.min(j), i.max(j));
+    let (top, bottom) = a.split_at_mut(hi * ncols);
+    top[lo * ncols..(lo + 1) * ncols].swap_with_slice(&mut bottom[..ncols]);
+}
+
+/// `y -= alpha * x`, elementwise over the common length.
+fn axpy_neg(y: &mut [f64], alpha: f64, x: &[f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi -= alpha * xi;
+    }
+}
+
+/// Solve `A x = b` in place, given the output of [`lu_factor`] for `A`.
+pub fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    // b := P b
+    for (c, &r) in piv[..n].iter().enumerate() {
+        b.swap(c, r);
+    }
+    // L y = P b (forward, unit diagonal)
+    for i in 1..n {
+        let s: f64 = (0..i).map(|k| lu[i * n + k] * b[k]).sum();
+        b[i] -= s;
+    }
+    // U x = y (backward)
+    for i in (0..n).rev() {
+        let s: f64 = (i + 1..n).map(|k| lu[i * n + k] * b[k]).sum();
+        b[i] = (b[i] - s) / lu[i * n + i];
+    }
+}
+
+/// Solve `Aᵀ x = b` in place, given the output of [`lu_factor`] for `A`.
+pub fn lu_solve_transpose(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    // Aᵀ = Uᵀ Lᵀ P;  Uᵀ w = b (forward)
+    for i in 0..n {
+        let s: f64 = (0..i).map(|k| lu[k * n + i] * b[k]).sum();
+        b[i] = (b[i] - s) / lu[i * n + i];
+    }
+    // Lᵀ v = w (backward, unit diagonal)
+    for i in (0..n).rev() {
+        let s: f64 = (i + 1..n).map(|k| lu[k * n + i] * b[k]).sum();
+        b[i] -= s;
+    }
+    // x = Pᵀ v (undo the swaps in reverse order)
+    for c in (0..n).rev() {
+        b.swap(c, piv[c]);
+    }
+}
+
+/// Overwrite the `m × n` row-major matrix `x` with `X A⁻¹` (i.e. solve `Y A = X`).
+///
+/// Each row `y` of `Y` satisfies `Aᵀ yᵀ = xᵀ`, so this is a transposed solve per row.
+pub fn lu_solve_right(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], m: usize) {
+    if n == 0 {
+        return;
+    }
+    for row in x[..m * n].chunks_exact_mut(n) {
+        lu_solve_transpose(lu, n, piv, row);
+    }
+}
+
+/// Overwrite the `n × ncols` row-major matrix `x` with `A⁻¹ X`.
+///
+/// Works on whole (contiguous) rows of `X`, i.e. all right-hand sides at once.
+pub fn lu_solve_left_matrix(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], ncols: usize) {
+    // X := P X
+    for (c, &r) in piv[..n].iter().enumerate() {
+        swap_rows(x, ncols, c, r);
+    }
+    // L Y = P X: row_i -= l_ik row_k for k < i
+    for i in 1..n {
+        let (top, bottom) = x.split_at_mut(i * ncols);
+        let row_i = &mut bottom[..ncols];
+        for (k, row_k) in top.chunks_exact(ncols).enumerate() {
+            axpy_neg(row_i, lu[i * n + k], row_k);
+        }
+    }
+    // U Z = Y: row_i = (row_i - Σ_{k>i} u_ik row_k) / u_ii
+    for i in (0..n).rev() {
+        let (top, bottom) = x.split_at_mut((i + 1) * ncols);
+        let row_i = &mut top[i * ncols..];
+        for (j, row_k) in bottom[..(n - i - 1) * ncols]
+            .chunks_exact(ncols)
+            .enumerate()
+        {
+            axpy_neg(row_i, lu[i * n + i + 1 + j], row_k);
+        }
+        let inv = 1.0 / lu[i * n + i];
+        row_i.iter_mut().for_each(|v| *v *= inv);
+    }
+}
+
+/// `C -= A · B` with `C` `m × n`, `A` `m × k`, `B` `k × n` (all row-major).
+pub fn gemm_sub(c: &mut [f64], a: &[f64], b: &[f64], m: usize, k: usize, n: usize) {
+    if n == 0 || k == 0 {
+        return;
+    }
+    for (c_row, a_row) in c[..m * n].chunks_exact_mut(n).zip(a.chunks_exact(k)) {
+        // c_i,: -= Σ_p a_ip b_p,:
+        for (&a_ip, b_row) in a_row.iter().zip(b.chunks_exact(n)) {
+            axpy_neg(c_row, a_ip, b_row);
+        }
+    }
+}
+
+/// `y -= A x` with `A` `m × n` row-major, `y` of length `m`, `x` of length `n`.
+pub fn gemv_sub(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
+    if n == 0 {
+        return;
+    }
+    for (yi, a_row) in y[..m].iter_mut().zip(a.chunks_exact(n)) {
+        *yi -= dot(a_row, x);
+    }
+}
+
+/// `y += A x` with `A` `m × n` row-major, `y` of length `m`, `x` of length `n`.
+pub fn gemv_add(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
+    if n == 0 {
+        return;
+    }
+    for (yi, a_row) in y[..m].iter_mut().zip(a.chunks_exact(n)) {
+        *yi += dot(a_row, x);
+    }
+}
+
+/// `y -= Aᵀ x` with `A` `m × n` row-major, `y` of length `n`, `x` of length `m`.
+pub fn gemv_t_sub(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
+    if n == 0 {
+        return;
+    }
+    for (&xi, a_row) in x[..m].iter().zip(a.chunks_exact(n)) {
+        // y -= x_i a_i,:
+        axpy_neg(&mut y[..n], xi, a_row);
+    }
+}
+
+/// Dot product over the common length.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    /// Deterministic SplitMix64 generator of uniform values in [-1, 1).
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        }
+        fn vec(&mut self, len: usize) -> Vec<f64> {
+            (0..len).map(|_| self.next()).collect()
+        }
+    }
+
+    fn assert_close(a: &[f64], b: &[f64], tol: f64) {
+        assert_eq!(a.len(), b.len());
+        let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() <= tol * scale, "{x} vs {y}");
+        }
+    }
+
+    fn factored(rng: &mut Rng, n: usize) -> (Vec<f64>, Vec<f64>, Vec<usize>) {
+        let a = rng.vec(n * n);
+        let mut lu = a.clone();
+        let mut piv = vec![0; n];
+        assert!(lu_factor(&mut lu, n, &mut piv));
+        (a, lu, piv)
+    }
+
+    #[test]
+    fn solves_match_nalgebra() {
+        let mut rng = Rng(7);
+        for n in 1..=8 {
+            for _ in 0..20 {
+                let (a, lu, piv) = factored(&mut rng, n);
+                let am = DMatrix::from_row_slice(n, n, &a);
+                let nlu = am.clone().lu();
+                let b = rng.vec(n);
+                let mut x = b.clone();
+                lu_solve(&lu, n, &piv, &mut x);
+                let xr = nlu
+                    .solve(&DVector::from_column_slice(&b))
+                    .unwrap_or_default();
+                assert_close(&x, xr.as_slice(), 1e-9);
+                let mut xt = b.clone();
+                lu_solve_transpose(&lu, n, &piv, &mut xt);
+                let xtr = am.transpose().lu().solve(&DVector::from_column_slice(&b));
+                assert_close(&xt, xtr.unwrap_or_default().as_slice(), 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn matrix_solves_match_nalgebra() {
+        let mut rng = Rng(11);
+        for n in 1..=7 {
+            for m in 1..=5 {
+                let (a, lu, piv) = factored(&mut rng, n);
+                let am = DMatrix::from_row_slice(n, n, &a);
+                let inv = am.try_inverse().unwrap_or_default();
+                // Right: X (m×n) A⁻¹
+                let x = rng.vec(m * n);
+                let mut y = x.clone();
+                lu_solve_right(&lu, n, &piv, &mut y, m);
+                let yr = DMatrix::from_row_slice(m, n, &x) * &inv;
+                assert_close(&y, yr.transpose().as_slice(), 1e-8);
+                // Left: A⁻¹ X (n×m)
+                let x = rng.vec(n * m);
+                let mut y = x.clone();
+                lu_solve_left_matrix(&lu, n, &piv, &mut y, m);
+                let yr = &inv * DMatrix::from_row_slice(n, m, &x);
+                assert_close(&y, yr.transpose().as_slice(), 1e-8);
+            }
+        }
+    }
+
+    #[test]
+    fn products_match_nalgebra() {
+        let mut rng = Rng(3);
+        for (m, k, n) in [(1, 1, 1), (2, 3, 4), (6, 6, 6), (5, 1, 3), (3, 6, 1)] {
+            let (a, b, c) = (rng.vec(m * k), rng.vec(k * n), rng.vec(m * n));
+            let mut c2 = c.clone();
+            gemm_sub(&mut c2, &a, &b, m, k, n);
+            let r = DMatrix::from_row_slice(m, n, &c)
+                - DMatrix::from_row_slice(m, k, &a) * DMatrix::from_row_slice(k, n, &b);
+            assert_close(&c2, r.transpose().as_slice(), 1e-12);
+
+            let am = DMatrix::from_row_slice(m, k, &a);
+            let (x, y) = (rng.vec(k), rng.vec(m));
+            let mut y2 = y.clone();
+            gemv_sub(&mut y2, &a, &x, m, k);
+            let r = DVector::from_column_slice(&y) - &am * DVector::from_column_slice(&x);
+            assert_close(&y2, r.as_slice(), 1e-12);
+            let mut y3 = y.clone();
+            gemv_add(&mut y3, &a, &x, m, k);
+            let r = DVector::from_column_slice(&y) + &am * DVector::from_column_slice(&x);
+            assert_close(&y3, r.as_slice(), 1e-12);
+
+            let (x, y) = (rng.vec(m), rng.vec(k));
+            let mut y2 = y.clone();
+            gemv_t_sub(&mut y2, &a, &x, m, k);
+            let r =
+                DVector::from_column_slice(&y) - am.transpose() * DVector::from_column_slice(&x);
+            assert_close(&y2, r.as_slice(), 1e-12);
+        }
+    }
+
+    #[test]
+    fn singular_and_non_finite_are_rejected() {
+        let mut piv = [0; 3];
+        let mut a = [1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 0.0, 1.0];
+        assert!(!lu_factor(&mut a, 3, &mut piv));
+        let mut z = [0.0; 4];
+        assert!(!lu_factor(&mut z, 2, &mut piv));
+        let mut nan = [1.0, f64::NAN, 0.5, 1.0];
+        assert!(!lu_factor(&mut nan, 2, &mut piv));
+        let mut inf = [f64::INFINITY, 0.0, 0.0, 1.0];
+        assert!(!lu_factor(&mut inf, 2, &mut piv));
+    }
+
+    #[test]
+    fn pivoting_handles_zero_leading_entry() {
+        let a = [0.0, 1.0, 1.0, 0.0];
+        let mut lu = a;
+        let mut piv = [0; 2];
+        assert!(lu_factor(&mut lu, 2, &mut piv));
+        let mut b = [2.0, 3.0];
+        lu_solve(&lu, 2, &piv, &mut b);
+        assert_eq!(b, [3.0, 2.0]);
+    }
+}

@@ -1,0 +1,797 @@
+//! Block-sparse LU (LDU) factorisation on a graph, in a caller-given elimination order.
+//!
+//! The Newton matrix of a multibody system is block sparse: graph nodes are bodies, joints
+//! and contacts, each owning a small dense diagonal block, and an edge couples two nodes
+//! through the off-diagonal blocks `(i, j)` and `(j, i)`. The matrix is unsymmetric but its
+//! sparsity pattern is symmetric. [`BlockPattern`] runs the elimination game once (when the
+//! model is compiled) to find the fill-in and precompute every offset the numeric phase
+//! needs; [`BlockMatrix`] then factors and solves every Newton iteration without allocating.
+//!
+//! The factorisation is right-looking block Gaussian elimination in the given order, with
+//! partial pivoting only inside diagonal blocks, so the cost is linear for trees eliminated
+//! leaves first and fill-in only appears along cycles. With `k` running over the order and
+//! `i`, `j` over the neighbours of `k` eliminated after it, step `k` computes
+//!
+//! ```text
+//! D_k  = A_kk                      (dense LU with pivoting, in place)
+//! U_kj = D_k⁻¹ A_kj                (overwrites A_kj)
+//! A_ij = A_ij - A_ik U_kj          (Schur complement; A_ik = L_ik D_k is kept)
+//! ```
+//!
+//! so that `A = L̃ Ũ` with `L̃` block lower triangular (diagonal `D_k`, below it `A_ik`) and
+//! `Ũ` unit block upper triangular (above the diagonal `U_kj`), in elimination order.
+
+use std::collections::BTreeSet;
+use std::ops::Range;
+
+use super::dense::{
+    gemm_sub, gemv_add, gemv_sub, gemv_t_sub, lu_factor, lu_solve, lu_solve_left_matrix,
+    lu_solve_transpose,
+};
+
+/// One elimination step: the node eliminated and where its data lives.
+#[derive(Clone, Debug)]
+struct Step {
+    /// Node eliminated at this step.
+    node: usize,
+    /// Block dimension of the node.
+    dim: usize,
+    /// Offset of the node's rows in a node-ordered vector (and of its pivots).
+    row: usize,
+    /// Offset of the diagonal block `A_kk` in the value arena.
+    diag: usize,
+    /// Range of this step's later neighbours in [`BlockPattern::nbrs`].
+    nbrs: Range<usize>,
+    /// Range of this step's Schur updates in [`BlockPattern::updates`].
+    updates: Range<usize>,
+}
+
+/// A neighbour `j` of the eliminated node `k` that is eliminated later.
+#[derive(Clone, Debug)]
+struct Nbr {
+    /// Block dimension of `j`.
+    dim: usize,
+    /// Offset of `j`'s rows in a node-ordered vector.
+    row: usize,
+    /// Arena offset of block `(k, j)` (holds `U_kj` after factorisation).
+    kj: usize,
+    /// Arena offset of block `(j, k)` (holds `L_jk D_k` after factorisation).
+    jk: usize,
+}
+
+/// One Schur update `A_ij -= A_ik U_kj` of an elimination step `k`.
+#[derive(Clone, Debug)]
+struct Update {
+    /// Arena offset of block `(i, j)`, the target.
+    ij: usize,
+    /// Arena offset of block `(i, k)`.
+    ik: usize,
+    /// Arena offset of block `(k, j)`.
+    kj: usize,
+    /// Block dimension of `i`.
+    di: usize,
+    /// Block dimension of `j`.
+    dj: usize,
+}
+
+/// Symbolic structure of a block-sparse matrix with symmetric pattern: immutable, built once.
+///
+/// Holds the block layout (including fill-in for the given elimination order) and the
+/// precomputed per-step work lists used by [`BlockMatrix::factor`] and the solves.
+#[derive(Clone, Debug)]
+pub struct BlockPattern {
+    /// Block dimension of each node.
+    dims: Vec<usize>,
+    /// Start of each node's rows in a node-ordered vector; `offsets[n]` is the total.
+    offsets: Vec<usize>,
+    /// Elimination order (`order[0]` first).
+    order: Vec<usize>,
+    /// CSR row starts into `cols` / `vals`, one row per node.
+    row_ptr: Vec<usize>,
+    /// Sorted column nodes of each row (diagonal, original and fill blocks).
+    cols: Vec<usize>,
+    /// Arena offset of each stored block, parallel to `cols`.
+    vals: Vec<usize>,
+    /// Arena length.
+    nvalues: usize,
+    /// Number of fill edges created by the elimination.
+    nfill: usize,
+    /// Largest block dimension.
+    max_dim: usize,
+    /// Elimination steps, in order.
+    steps: Vec<Step>,
+    /// Later neighbours of all steps, concatenated.
+    nbrs: Vec<Nbr>,
+    /// Schur updates of all steps, concatenated.
+    updates: Vec<Update>,
+}
+
+impl BlockPattern {
+    /// Build the pattern of a graph with node block sizes `dims`, undirected `edges` and
+    /// elimination `order`.
+    ///
+    /// `dims[i] >= 1` is the block size of node `i`; `edges` are pairs `(i, j)` with
+    /// `i != j` (duplicates, in either direction, are ignored); `order` must be a
+    /// permutation of `0..dims.len()`, `order[0]` being eliminated first. Computes the
+    /// fill-in by the elimination game and precomputes all arena offsets and per-step
+    /// update lists, so the numeric phase needs no hashing or allocation.
+    pub fn new(dims: &[usize], edges: &[(usize, usize)], order: &[usize]) -> Result<Self, String> {
+        let n = dims.len();
+        if let Some(i) = dims.iter().position(|&d| d == 0) {
+            return Err(format!("node {i} has block dimension 0"));
+        }
+        let pos = positions(order, n)?;
+        let mut adj = adjacency(n, edges)?;
+        let nfill = eliminate(&mut adj, order, &pos);
+        let mut offsets = Vec::with_capacity(n + 1);
+        let mut total = 0;
+        for &d in dims {
+            offsets.push(total);
+            total += d;
+        }
+        offsets.push(total);
+        let mut p = Self {
+            dims: dims.to_vec(),
+            offsets,
+            order: order.to_vec(),
+            row_ptr: Vec::with_capacity(n + 1),
+            cols: Vec::new(),
+            vals: Vec::new(),
+            nvalues: 0,
+            nfill,
+            max_dim: dims.iter().copied().max().unwrap_or(0),
+            steps: Vec::with_capacity(n),
+            nbrs: Vec::new(),
+            updates: Vec::new(),
+        };
+        p.layout(&adj);
+        p.plan(&adj, &pos)?;
+        Ok(p)
+    }
+
+    /// Lay out every stored block (diagonal + neighbours) row by row in the value arena.
+    fn layout(&mut self, adj: &[BTreeSet<usize>]) {
+        for (i, nbrs) in adj.iter().enumerate() {
+            self.row_ptr.push(self.cols.len());
+            let below = nbrs.range(..i).copied();
+            let above = nbrs.range(i + 1..).copied();
+            for j in below.chain(std::iter::once(i)).chain(above) {
+                self.cols.push(j);
+                self.vals.push(self.nvalues);
+                self.nvalues += self.dims[i] * self.dims[j];
+            }
+        }
+        self.row_ptr.push(self.cols.len());
+    }
+
+    /// Precompute, for each elimination step, its later neighbours and Schur updates.
+    fn plan(&mut self, adj: &[BTreeSet<usize>], pos: &[usize]) -> Result<(), String> {
+        for &k in &self.order {
+            let later: Vec<usize> = adj[k]
+                .iter()
+                .copied()
+                .filter(|&j| pos[j] > pos[k])
+                .collect();
+            let nbr_start = self.nbrs.len();
+            let upd_start = self.updates.len();
+            for &j in &later {
+                let (kj, jk) = (self.stored(k, j)?, self.stored(j, k)?);
+                let (dim, row) = (self.dims[j], self.offsets[j]);
+                self.nbrs.push(Nbr { dim, row, kj, jk });
+            }
+            for &i in &later {
+                for &j in &later {
+                    let (ij, ik, kj) = (self.stored(i, j)?, self.stored(i, k)?, self.stored(k, j)?);
+                    let (di, dj) = (self.dims[i], self.dims[j]);
+                    self.updates.push(Update { ij, ik, kj, di, dj });
+                }
+            }
+            self.steps.push(Step {
+                node: k,
+                dim: self.dims[k],
+                row: self.offsets[k],
+                diag: self.stored(k, k)?,
+                nbrs: nbr_start..self.nbrs.len(),
+                updates: upd_start..self.updates.len(),
+            });
+        }
+        Ok(())
+    }
+
+    /// [`Self::block`], as an error if the block is missing (an internal inconsistency).
+    fn stored(&self, i: usize, j: usize) -> Result<usize, String> {
+        self.block(i, j)
+            .ok_or_else(|| format!("internal error: block ({i}, {j}) missing after fill-in"))
+    }
+
+    /// Number of nodes.
+    pub fn nnodes(&self) -> usize {
+        self.dims.len()
+    }
+
+    /// Block dimension of `node`.
+    pub fn dim(&self, node: usize) -> usize {
+        self.dims[node]
+    }
+
+    /// Largest block dimension (0 for an empty pattern).
+    pub fn max_dim(&self) -> usize {
+        self.max_dim
+    }
+
+    /// Sum of all block dimensions (the matrix size).
+    pub fn total_dim(&self) -> usize {
+        self.offsets[self.dims.len()]
+    }
+
+    /// Start of `node`'s rows in a flat vector laid out in node index order.
+    pub fn offset(&self, node: usize) -> usize {
+        self.offsets[node]
+    }
+
+    /// The elimination order (`order()[0]` is eliminated first).
+    pub fn order(&self) -> &[usize] {
+        &self.order
+    }
+
+    /// Offset in the value arena of block `(i, j)` (row node `i`, column node `j`), stored
+    /// row-major as `dim(i) × dim(j)`.
+    ///
+    /// `Some` for `i == j`, for every original edge (both directions) and every fill edge;
+    /// `None` otherwise (including out-of-range nodes).
+    pub fn block(&self, i: usize, j: usize) -> Option<usize> {
+        let row = *self.row_ptr.get(i)?..*self.row_ptr.get(i + 1)?;
+        let cols = &self.cols[row.clone()];
+        cols.binary_search(&j)
+            .ok()
+            .map(|idx| self.vals[row.start + idx])
+    }
+
+    /// Length of the value arena.
+    pub fn nvalues(&self) -> usize {
+        self.nvalues
+    }
+
+    /// Number of fill edges created by the elimination (each counted once).
+    pub fn nfill(&self) -> usize {
+        self.nfill
+    }
+}
+
+/// Inverse of the permutation `order` of `0..n`, or an error if it is not one.
+fn positions(order: &[usize], n: usize) -> Result<Vec<usize>, String> {
+    if order.len() != n {
+        return Err(format!("order has {} entries, expected {n}", order.len()));
+    }
+    let mut pos = vec![usize::MAX; n];
+    for (p, &node) in order.iter().enumerate() {
+        match pos.get_mut(node) {
+            None => return Err(format!("order entry {node} out of range (n = {n})")),
+            Some(slot) if *slot != usize::MAX => {
+                return Err(format!("node {node} appears twice in order"));
+            }
+            Some(slot) => *slot = p,
+        }
+    }
+    Ok(pos)
+}
+
+/// Sorted neighbour sets of the undirected graph, or an error for a bad edge.
+fn adjacency(n: usize, edges: &[(usize, usize)]) -> Result<Vec<BTreeSet<usize>>, String> {
+    let mut adj = vec![BTreeSet::new(); n];
+    for &(i, j) in edges {
+        if i >= n || j >= n {
+            return Err(format!("edge ({i}, {j}) out of range (n = {n})"));
+        }
+        if i == j {
+            return Err(format!("self edge ({i}, {i})"));
+        }
+        adj[i].insert(j);
+        adj[j].insert(i);
+    }
+    Ok(adj)
+}
+
+/// Elimination game: eliminating `k` connects all its later neighbours pairwise.
+/// Adds the fill edges to `adj` and returns how many were created.
+fn eliminate(adj: &mut [BTreeSet<usize>], order: &[usize], pos: &[usize]) -> usize {
+    let mut nfill = 0;
+    for &k in order {
+        let later: Vec<usize> = adj[k]
+            .iter()
+            .copied()
+            .filter(|&j| pos[j] > pos[k])
+            .collect();
+        for (a, &i) in later.iter().enumerate() {
+            for &j in &later[a + 1..] {
+                if adj[i].insert(j) {
+                    adj[j].insert(i);
+                    nfill += 1;
+                }
+            }
+        }
+    }
+    nfill
+}
+
+/// Borrow `v[out]` mutably and `v[a]`, `v[b]` immutably; `out` must be disjoint from both.
+fn split3(
+    v: &mut [f64],
+    out: Range<usize>,
+    a: Range<usize>,
+    b: Range<usize>,
+) -> (&mut [f64], &[f64], &[f64]) {
+    let (lo, rest) = v.split_at_mut(out.start);
+    let (mid, hi) = rest.split_at_mut(out.len());
+    let (lo, hi): (&[f64], &[f64]) = (lo, hi);
+    (mid, pick(lo, hi, out.end, a), pick(lo, hi, out.end, b))
+}
+
+/// The range `r` of the original slice, found in `lo` (before the hole) or `hi` (from `hi_start`).
+fn pick<'a>(lo: &'a [f64], hi: &'a [f64], hi_start: usize, r: Range<usize>) -> &'a [f64] {
+    if r.end <= lo.len() {
+        &lo[r]
+    } else {
+        &hi[r.start - hi_start..r.end - hi_start]
+    }
+}
+
+/// Numeric values and factorisation of a matrix with a given [`BlockPattern`], reused
+/// every iteration.
+///
+/// Typical cycle: [`zero`](Self::zero), assemble with [`block_mut`](Self::block_mut) /
+/// [`add_to_block`](Self::add_to_block), [`factor`](Self::factor), then any number of
+/// [`solve`](Self::solve) / [`solve_transpose`](Self::solve_transpose) calls. Factoring
+/// overwrites `values`, so zero and reassemble before factoring again.
+#[derive(Clone, Debug)]
+pub struct BlockMatrix {
+    /// Value arena: block `(i, j)` is `values[p.block(i, j)..][..dim(i) * dim(j)]`, row-major.
+    /// Fill blocks must be zero before [`factor`](Self::factor).
+    pub values: Vec<f64>,
+    /// Pivots of the diagonal blocks, laid out like a node-ordered vector.
+    pivots: Vec<usize>,
+    /// Scratch vector of length `max_dim` for the solves.
+    scratch: Vec<f64>,
+}
+
+impl BlockMatrix {
+    /// A zero matrix with pattern `p`.
+    pub fn new(p: &BlockPattern) -> Self {
+        Self {
+            values: vec![0.0; p.nvalues()],
+            pivots: vec![0; p.total_dim()],
+            scratch: vec![0.0; p.max_dim()],
+        }
+    }
+
+    /// Set all values (including fill blocks) to zero, keeping the allocation.
+    pub fn zero(&mut self) {
+        self.values.fill(0.0);
+    }
+
+    /// Mutable row-major view of block `(i, j)`, or `None` if it is not stored.
+    pub fn block_mut(&mut self, p: &BlockPattern, i: usize, j: usize) -> Option<&mut [f64]> {
+        let off = p.block(i, j)?;
+        self.values.get_mut(off..off + p.dim(i) * p.dim(j))
+    }
+
+    /// `values[offset..offset + rows * cols] += src` (a row-major `rows × cols` block).
+    ///
+    /// Panics if the range is outside the arena or `src` is shorter than `rows * cols`.
+    pub fn add_to_block(&mut self, offset: usize, rows: usize, cols: usize, src: &[f64]) {
+        let dst = &mut self.values[offset..offset + rows * cols];
+        for (d, s) in dst.iter_mut().zip(&src[..rows * cols]) {
+            *d += s;
+        }
+    }
+
+    /// `y = A x` with the current (unfactored) values; both vectors laid out in node order.
+    ///
+    /// Only meaningful before [`factor`](Self::factor), which overwrites the values.
+    pub fn matvec(&self, p: &BlockPattern, x: &[f64], y: &mut [f64]) {
+        y.fill(0.0);
+        for i in 0..p.nnodes() {
+            let (oi, di) = (p.offset(i), p.dim(i));
+            for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
+                let (j, off) = (p.cols[idx], p.vals[idx]);
+                let xj = &x[p.offset(j)..p.offset(j) + p.dim(j)];
+                // y_i += A_ij x_j
+                gemv_add(&mut y[oi..oi + di], &self.values[off..], xj, di, p.dim(j));
+            }
+        }
+    }
+
+    /// In-place block LU factorisation in the pattern's elimination order.
+    ///
+    /// Returns `Err(node)` if the (Schur-complemented) diagonal block of `node` is singular
+    /// or not finite; the values are then partially factored and must be reassembled.
+    pub fn factor(&mut self, p: &BlockPattern) -> Result<(), usize> {
+        for s in &p.steps {
+            let dk = s.dim;
+            let piv = &mut self.pivots[s.row..s.row + dk];
+            // D_k = A_kk = P L U
+            if !lu_factor(&mut self.values[s.diag..s.diag + dk * dk], dk, piv) {
+                return Err(s.node);
+            }
+            let diag = s.diag..s.diag + dk * dk;
+            for nb in &p.nbrs[s.nbrs.clone()] {
+                let kj = nb.kj..nb.kj + dk * nb.dim;
+                let (akj, d, _) = split3(&mut self.values, kj, diag.clone(), diag.clone());
+                // U_kj = D_k⁻¹ A_kj
+                lu_solve_left_matrix(d, dk, piv, akj, nb.dim);
+            }
+            for u in &p.updates[s.updates.clone()] {
+                let ij = u.ij..u.ij + u.di * u.dj;
+                let (ik, kj) = (u.ik..u.ik + u.di * dk, u.kj..u.kj + dk * u.dj);
+                let (aij, aik, ukj) = split3(&mut self.values, ij, ik, kj);
+                // A_ij -= A_ik U_kj
+                gemm_sub(aij, aik, ukj, u.di, dk, u.dj);
+            }
+        }
+        Ok(())
+    }
+
+    /// Solve `A x = b` in place (`b` laid out in node order, see [`BlockPattern::offset`]),
+    /// using the factorisation from a successful [`factor`](Self::factor).
+    ///
+    /// Panics if `b.len() != p.total_dim()`.
+    pub fn solve(&mut self, p: &BlockPattern, b: &mut [f64]) {
+        assert_eq!(
+            b.len(),
+            p.total_dim(),
+            "right-hand side has the wrong length"
+        );
+        let z = &mut self.scratch;
+        // Forward, L̃ z = b: z_k = D_k⁻¹ y_k, then y_i -= A_ik z_k for later i.
+        for s in &p.steps {
+            let (dk, rows) = (s.dim, s.row..s.row + s.dim);
+            let piv = &self.pivots[rows.clone()];
+            lu_solve(&self.values[s.diag..], dk, piv, &mut b[rows.clone()]);
+            z[..dk].copy_from_slice(&b[rows]);
+            for nb in &p.nbrs[s.nbrs.clone()] {
+                let yi = &mut b[nb.row..nb.row + nb.dim];
+                gemv_sub(yi, &self.values[nb.jk..], &z[..dk], nb.dim, dk);
+            }
+        }
+        // Backward, Ũ x = z: x_k = z_k - Σ_{later j} U_kj x_j.
+        for s in p.steps.iter().rev() {
+            let (dk, rows) = (s.dim, s.row..s.row + s.dim);
+            z[..dk].copy_from_slice(&b[rows.clone()]);
+            for nb in &p.nbrs[s.nbrs.clone()] {
+                let xj = &b[nb.row..nb.row + nb.dim];
+                gemv_sub(&mut z[..dk], &self.values[nb.kj..], xj, dk, nb.dim);
+            }
+            b[rows].copy_from_slice(&z[..dk]);
+        }
+    }
+
+    /// Solve `Aᵀ x = b` in place (`b` laid out in node order), using the same
+    /// factorisation as [`solve`](Self::solve) (`Aᵀ = Ũᵀ L̃ᵀ`).
+    pub fn solve_transpose(&mut self, p: &BlockPattern, b: &mut [f64]) {
+        assert_eq!(
+            b.len(),
+            p.total_dim(),
+            "right-hand side has the wrong length"
+        );
+        let w = &mut self.scratch;
+        // Forward, Ũᵀ w = b: w_k = y_k, then y_j -= U_kjᵀ w_k for later j.
+        for s in &p.steps {
+            let (dk, rows) = (s.dim, s.row..s.row + s.dim);
+            w[..dk].copy_from_slice(&b[rows]);
+            for nb in &p.nbrs[s.nbrs.clone()] {
+                let yj = &mut b[nb.row..nb.row + nb.dim];
+                gemv_t_sub(yj, &self.values[nb.kj..], &w[..dk], dk, nb.dim);
+            }
+        }
+        // Backward, L̃ᵀ x = w: x_k = D_k⁻ᵀ (w_k - Σ_{later i} A_ikᵀ x_i).
+        for s in p.steps.iter().rev() {
+            let (dk, rows) = (s.dim, s.row..s.row + s.dim);
+            w[..dk].copy_from_slice(&b[rows.clone()]);
+            for nb in &p.nbrs[s.nbrs.clone()] {
+                let xi = &b[nb.row..nb.row + nb.dim];
+                gemv_t_sub(&mut w[..dk], &self.values[nb.jk..], xi, nb.dim, dk);
+            }
+            let piv = &self.pivots[rows.clone()];
+            lu_solve_transpose(&self.values[s.diag..], dk, piv, &mut w[..dk]);
+            b[rows].copy_from_slice(&w[..dk]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+    use proptest::prelude::*;
+
+    /// Deterministic SplitMix64 generator.
+    struct Rng(u64);
+    impl Rng {
+        fn bits(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+        /// Uniform in [-1, 1).
+        fn next(&mut self) -> f64 {
+            (self.bits() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        }
+        /// Uniform in 0..n.
+        fn below(&mut self, n: usize) -> usize {
+            (self.bits() % n as u64) as usize
+        }
+        fn vec(&mut self, len: usize) -> Vec<f64> {
+            (0..len).map(|_| self.next()).collect()
+        }
+        fn shuffle(&mut self, v: &mut [usize]) {
+            for i in (1..v.len()).rev() {
+                v.swap(i, self.below(i + 1));
+            }
+        }
+    }
+
+    /// Fill the diagonal blocks (random + `shift`·I) and both blocks of every edge (random).
+    fn assemble(
+        p: &BlockPattern,
+        edges: &[(usize, usize)],
+        shift: f64,
+        rng: &mut Rng,
+    ) -> BlockMatrix {
+        let mut m = BlockMatrix::new(p);
+        for i in 0..p.nnodes() {
+            let d = p.dim(i);
+            let blk = m.block_mut(p, i, i).unwrap();
+            blk.copy_from_slice(&rng.vec(d * d));
+            (0..d).for_each(|r| blk[r * d + r] += shift);
+        }
+        for &(i, j) in edges {
+            for (r, c) in [(i, j), (j, i)] {
+                let len = p.dim(r) * p.dim(c);
+                m.block_mut(p, r, c).unwrap().copy_from_slice(&rng.vec(len));
+            }
+        }
+        m
+    }
+
+    /// Dense copy of the (unfactored) matrix, in node order.
+    fn dense(p: &BlockPattern, m: &BlockMatrix) -> DMatrix<f64> {
+        let mut a = DMatrix::zeros(p.total_dim(), p.total_dim());
+        for i in 0..p.nnodes() {
+            for j in 0..p.nnodes() {
+                let Some(off) = p.block(i, j) else { continue };
+                let (di, dj) = (p.dim(i), p.dim(j));
+                for r in 0..di {
+                    for c in 0..dj {
+                        a[(p.offset(i) + r, p.offset(j) + c)] = m.values[off + r * dj + c];
+                    }
+                }
+            }
+        }
+        a
+    }
+
+    /// Relative error ‖x - y‖ / ‖y‖.
+    fn rel(x: &[f64], y: &[f64]) -> f64 {
+        let (xv, yv) = (DVector::from_column_slice(x), DVector::from_column_slice(y));
+        (xv - &yv).norm() / yv.norm().max(f64::MIN_POSITIVE)
+    }
+
+    /// Factor, solve and transpose-solve; check residuals (< 1e-10) and against nalgebra.
+    fn check(p: &BlockPattern, mut m: BlockMatrix, rng: &mut Rng) {
+        let a = dense(p, &m);
+        let orig = m.clone();
+        m.factor(p).unwrap();
+        let n = p.total_dim();
+        for _ in 0..3 {
+            let b = rng.vec(n);
+            // A x = b
+            let mut x = b.clone();
+            m.solve(p, &mut x);
+            let mut ax = vec![0.0; n];
+            orig.matvec(p, &x, &mut ax);
+            assert!(rel(&ax, &b) < 1e-10, "residual {}", rel(&ax, &b));
+            let xr = a
+                .clone()
+                .lu()
+                .solve(&DVector::from_column_slice(&b))
+                .unwrap();
+            assert!(rel(&x, xr.as_slice()) < 1e-8);
+            // Aᵀ x = b
+            let mut xt = b.clone();
+            m.solve_transpose(p, &mut xt);
+            let atx = a.transpose() * DVector::from_column_slice(&xt);
+            assert!(rel(atx.as_slice(), &b) < 1e-10, "transposed residual");
+            let xtr = a
+                .transpose()
+                .lu()
+                .solve(&DVector::from_column_slice(&b))
+                .unwrap();
+            assert!(rel(&xt, xtr.as_slice()) < 1e-8);
+        }
+    }
+
+    #[test]
+    fn chain_has_no_fill() {
+        let mut rng = Rng(1);
+        let dims: Vec<usize> = (0..9).map(|i| [6, 5, 3, 6, 1, 2][i % 6]).collect();
+        let edges: Vec<(usize, usize)> = (1..9).map(|i| (i - 1, i)).collect();
+        // Both leaves inwards: 0, 8, 1, 7, ... meeting in the middle.
+        let order = [0, 8, 1, 7, 2, 6, 3, 5, 4];
+        let p = BlockPattern::new(&dims, &edges, &order).unwrap();
+        assert_eq!(p.nfill(), 0);
+        assert_eq!(p.total_dim(), dims.iter().sum::<usize>());
+        assert!(p.block(0, 2).is_none() && p.block(3, 2).is_some());
+        let m = assemble(&p, &edges, 4.0, &mut rng);
+        check(&p, m, &mut rng);
+    }
+
+    #[test]
+    fn branching_tree_has_no_fill() {
+        let mut rng = Rng(2);
+        let parent = [0, 0, 0, 1, 1, 2, 2, 2, 4, 4, 7];
+        let dims = [6, 3, 6, 1, 5, 6, 2, 4, 6, 6, 3];
+        let edges: Vec<(usize, usize)> = (1..11).map(|i| (parent[i], i)).collect();
+        // Children have larger indices than parents: reverse index order is leaves first.
+        let order: Vec<usize> = (0..11).rev().collect();
+        let p = BlockPattern::new(&dims, &edges, &order).unwrap();
+        assert_eq!(p.nfill(), 0);
+        let m = assemble(&p, &edges, 3.0, &mut rng);
+        check(&p, m, &mut rng);
+    }
+
+    #[test]
+    fn cycle_creates_fill_and_stays_exact() {
+        let mut rng = Rng(3);
+        let dims = [6, 2, 6, 3, 6, 1];
+        let edges: Vec<(usize, usize)> = (0..6).map(|i| (i, (i + 1) % 6)).collect();
+        let p = BlockPattern::new(&dims, &edges, &[0, 1, 2, 3, 4, 5]).unwrap();
+        // Eliminating around a 6-cycle links the last node to each remaining one.
+        assert_eq!(p.nfill(), 3);
+        assert!(p.block(1, 5).is_some() && p.block(5, 1).is_some());
+        let m = assemble(&p, &edges, 2.0, &mut rng);
+        check(&p, m, &mut rng);
+    }
+
+    /// Bodies (SPD 6×6) and joints (zero diagonal) of a random tree, plus `loops` loop joints.
+    /// Order: each body, then the joint to its parent; loop joints last.
+    fn multibody(nb: usize, loops: usize, rng: &mut Rng) -> (BlockPattern, BlockMatrix) {
+        let mut dims = vec![6; nb];
+        let mut links = Vec::new(); // (joint, child body, parent body < child)
+        for b in 1..nb {
+            links.push((dims.len(), b, rng.below(b)));
+            dims.push(1 + rng.below(5));
+        }
+        let mut order = Vec::new();
+        for b in (1..nb).rev() {
+            order.extend([b, nb + b - 1]);
+        }
+        order.push(0);
+        for _ in 0..loops {
+            let (a, b) = (rng.below(nb), rng.below(nb));
+            links.push((dims.len(), a, if a == b { (a + 1) % nb } else { b }));
+            order.push(dims.len());
+            dims.push(1 + rng.below(3));
+        }
+        let edges: Vec<(usize, usize)> = links
+            .iter()
+            .flat_map(|&(j, a, b)| [(j, a), (j, b)])
+            .collect();
+        let p = BlockPattern::new(&dims, &edges, &order).unwrap();
+        let mut m = BlockMatrix::new(&p);
+        for b in 0..nb {
+            // M = R Rᵀ + I
+            let r = DMatrix::from_row_slice(6, 6, &rng.vec(36));
+            let mass = &r * r.transpose() + DMatrix::identity(6, 6);
+            m.block_mut(&p, b, b)
+                .unwrap()
+                .copy_from_slice(mass.transpose().as_slice());
+        }
+        for &(j, a, b) in &links {
+            for body in [a, b] {
+                let dj = p.dim(j);
+                m.block_mut(&p, j, body)
+                    .unwrap()
+                    .copy_from_slice(&rng.vec(dj * 6));
+                m.block_mut(&p, body, j)
+                    .unwrap()
+                    .copy_from_slice(&rng.vec(6 * dj));
+            }
+        }
+        (p, m)
+    }
+
+    #[test]
+    fn saddle_point_tree() {
+        let mut rng = Rng(4);
+        for _ in 0..20 {
+            let (p, m) = multibody(8, 0, &mut rng);
+            assert_eq!(p.nfill(), 0);
+            check(&p, m, &mut rng);
+        }
+    }
+
+    #[test]
+    fn saddle_point_with_loop_joints() {
+        let mut rng = Rng(5);
+        for _ in 0..20 {
+            let (p, m) = multibody(7, 2, &mut rng);
+            check(&p, m, &mut rng);
+        }
+    }
+
+    #[test]
+    fn singular_diagonal_block_is_reported() {
+        let edges = [(0, 1), (1, 2)];
+        let p = BlockPattern::new(&[2, 3, 2], &edges, &[1, 0, 2]).unwrap();
+        let mut m = assemble(&p, &edges, 3.0, &mut Rng(6));
+        m.block_mut(&p, 1, 1).unwrap().fill(0.0);
+        assert_eq!(m.factor(&p), Err(1));
+        // A Schur complement that becomes exactly zero: [[1, 1], [1, 1]].
+        let p = BlockPattern::new(&[1, 1], &[(0, 1)], &[0, 1]).unwrap();
+        let mut m = BlockMatrix::new(&p);
+        m.values.fill(1.0);
+        assert_eq!(m.factor(&p), Err(1));
+    }
+
+    #[test]
+    fn zero_diagonal_needs_pivoting_inside_block() {
+        // Diagonal block [[0, 1], [1, 0]] only factors with row pivoting.
+        let p = BlockPattern::new(&[2], &[], &[0]).unwrap();
+        let mut m = BlockMatrix::new(&p);
+        m.add_to_block(p.block(0, 0).unwrap(), 2, 2, &[0.0, 1.0, 1.0, 0.0]);
+        let mut rng = Rng(7);
+        check(&p, m, &mut rng);
+    }
+
+    #[test]
+    fn invalid_input_is_rejected() {
+        assert!(BlockPattern::new(&[1, 0], &[], &[0, 1]).is_err());
+        assert!(BlockPattern::new(&[1, 1], &[(0, 0)], &[0, 1]).is_err());
+        assert!(BlockPattern::new(&[1, 1], &[(0, 2)], &[0, 1]).is_err());
+        assert!(BlockPattern::new(&[1, 1], &[], &[0, 0]).is_err());
+        assert!(BlockPattern::new(&[1, 1], &[], &[0]).is_err());
+        assert!(BlockPattern::new(&[1, 1], &[], &[0, 2]).is_err());
+        let p = BlockPattern::new(&[1, 2], &[(0, 1), (1, 0), (0, 1)], &[1, 0]).unwrap();
+        assert_eq!(p.nvalues(), 1 + 2 + 2 + 4);
+        assert!(p.block(2, 0).is_none() && p.block(0, 2).is_none());
+    }
+
+    #[test]
+    fn zero_keeps_pattern_and_refactors() {
+        let mut rng = Rng(8);
+        let edges = [(0, 1), (1, 2), (2, 0)];
+        let p = BlockPattern::new(&[3, 2, 4], &edges, &[0, 1, 2]).unwrap();
+        let mut m = assemble(&p, &edges, 3.0, &mut rng);
+        m.factor(&p).unwrap();
+        m.zero();
+        assert!(m.values.iter().all(|&v| v == 0.0));
+        assert_eq!(m.values.len(), p.nvalues());
+        let fresh = assemble(&p, &edges, 3.0, &mut rng);
+        m.values.copy_from_slice(&fresh.values);
+        check(&p, m, &mut rng);
+    }
+
+    proptest! {
+        #[test]
+        fn random_graphs_and_orders(n in 1usize..14, extra in 0usize..8, seed in any::<u64>()) {
+            let mut rng = Rng(seed);
+            let dims: Vec<usize> = (0..n).map(|_| 1 + rng.below(6)).collect();
+            let mut edges: Vec<(usize, usize)> = (1..n).map(|i| (rng.below(i), i)).collect();
+            for _ in 0..extra {
+                let (i, j) = (rng.below(n), rng.below(n));
+                if i != j {
+                    edges.push((i, j));
+                }
+            }
+            let mut order: Vec<usize> = (0..n).collect();
+            rng.shuffle(&mut order);
+            let p = BlockPattern::new(&dims, &edges, &order).unwrap();
+            // Strict row diagonal dominance: off-diagonal entries are in [-1, 1).
+            let shift = p.total_dim() as f64 + 1.0;
+            let m = assemble(&p, &edges, shift, &mut rng);
+            check(&p, m, &mut rng);
+        }
+    }
+}

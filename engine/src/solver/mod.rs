@@ -1,0 +1,5 @@
+//! Nonlinear solve of one time step: Newton's method on the residual `F(z⁻, z, z⁺, j) = 0`
+//! (Dojo eq. 15) with the block-sparse graph factorisation of the Newton matrix.
+pub mod dense;
+pub mod graph_ldu;
+pub(crate) mod newton;

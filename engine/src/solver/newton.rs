@@ -1,0 +1,368 @@
+//! Newton's method for the equality-constrained step: unknowns are each moving body's next
+//! midpoint velocities `(v⁺, ω⁺)` and each joint's constraint impulses `λ`.
+//!
+//! ```text
+//! body rows:  r_b = momentum(v⁺, ω⁺) - applied_b - Σ_j K_jbᵀ λ_j + h J_fᵀ D J_f w⁺   (impulses)
+//! joint rows: r_j = k_j(x⁺_parent, x⁺_child)                                      (eq. 13)
+//! ```
+//! `K` is the constraint Jacobian at the current configuration, `k` is evaluated at the next
+//! one, `x⁺ = (p + h v⁺, q ⊗ f(ω⁺))`. Dampers act on the next velocities (implicit), springs and
+//! inputs at the current configuration. Updates of `ω⁺` are limited so `|ω⁺| < 2/h` (eq. 18's
+//! domain): a too-fast spin ends as a reported failure, never a crash.
+use nalgebra::{Matrix3, Vector3};
+
+use crate::integrator::variational::{momentum_residual, rot_jacobian};
+use crate::joints::Joint;
+use crate::joints::geometry::{JointFrame, Pose};
+use crate::math::quat;
+use crate::model::Model;
+use crate::model::topology_body_node as body_node;
+use crate::state::{SolveStatus, State, StepReport, Workspace};
+
+/// Applied generalized and Cartesian forces for one step (beyond actuators).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct AppliedForces<'a> {
+    /// Generalized forces on `qvel` dofs (N or N·m). Shape (nv,).
+    pub qfrc: Option<&'a [f64]>,
+    /// World-frame wrenches `[force, torque]` at each body's COM. Shape (nbody, 6).
+    pub xfrc: Option<&'a [f64]>,
+}
+
+/// Fraction of the angular-speed limit `2/h` that an iterate may reach.
+const MAX_SPIN_FRACTION: f64 = 0.995;
+
+fn body_slot(model: &Model, b: usize) -> usize {
+    body_node(b).map_or(0, |n| model.topology.pattern.offset(n))
+}
+
+fn w_body(model: &Model, w: &[f64], b: usize) -> (Vector3<f64>, Vector3<f64>) {
+    if b == 0 {
+        return (Vector3::zeros(), Vector3::zeros());
+    }
+    let o = body_slot(model, b);
+    (Vector3::new(w[o], w[o + 1], w[o + 2]), Vector3::new(w[o + 3], w[o + 4], w[o + 5]))
+}
+
+fn pose(state: &State, b: usize) -> Pose {
+    if b == 0 { Pose::world() } else { state.pose(b) }
+}
+
+/// Evaluate applied impulses and current-configuration Jacobians; set the initial iterate.
+pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace, ctrl: &[f64], forces: &AppliedForces) {
+    let h = model.options.timestep;
+    let g = model.options.gravity;
+    for (b, body) in model.bodies.iter().enumerate() {
+        let mut a = [0.0; 6];
+        if b > 0 {
+            let rot = quat::rotation(&state.pose(b).quat);
+            let (f, tau) = match forces.xfrc {
+                Some(x) => (Vector3::new(x[6 * b], x[6 * b + 1], x[6 * b + 2]), Vector3::new(x[6 * b + 3], x[6 * b + 4], x[6 * b + 5])),
+                None => (Vector3::zeros(), Vector3::zeros()),
+            };
+            let lin = (g * body.mass + f) * h;
+            let rot_b = rot.transpose() * tau * h;
+            a = [lin[0], lin[1], lin[2], rot_b[0], rot_b[1], rot_b[2]];
+        }
+        ws.applied[b] = a;
+    }
+    for (ji, joint) in model.joints.iter().enumerate() {
+        let frame = JointFrame::new(joint, &pose(state, joint.parent), &pose(state, joint.child));
+        let adr = model.topology.con_adr[ji];
+        frame.constraint_jacobian(joint, &mut ws.jac_now[12 * adr..12 * (adr + joint.ncon())]);
+        let nf = joint.nfree();
+        let fa = ws.free_adr[ji];
+        frame.free_jacobian(joint, &mut ws.free_jac[fa..fa + 12 * nf]);
+        let mut tau = [0.0; 6];
+        generalized_force(model, ji, &frame, ctrl, forces, &mut tau[..nf]);
+        if tau[..nf].iter().any(|&t| t != 0.0) {
+            let jf = &ws.free_jac[fa..fa + 12 * nf];
+            add_jt_times(&mut ws.applied, joint, jf, &tau[..nf], h);
+        }
+    }
+    // initial iterate: previous velocities and impulses (warm start)
+    for b in 1..model.nbody() {
+        let o = body_slot(model, b);
+        let (v, w) = state.velocity(b);
+        ws.w[o..o + 3].copy_from_slice(v.as_slice());
+        ws.w[o + 3..o + 6].copy_from_slice(w.as_slice());
+    }
+    for (ji, joint) in model.joints.iter().enumerate() {
+        if let Some(n) = model.topology.joint_node[ji] {
+            let (o, adr) = (model.topology.pattern.offset(n), model.topology.con_adr[ji]);
+            ws.w[o..o + joint.ncon()].copy_from_slice(&state.joint_impulse[adr..adr + joint.ncon()]);
+        }
+    }
+}
+
+/// Spring + actuator + applied generalized force on the free dofs of joint `ji`.
+fn generalized_force(model: &Model, ji: usize, frame: &JointFrame, ctrl: &[f64], forces: &AppliedForces, tau: &mut [f64]) {
+    let joint = &model.joints[ji];
+    if joint.has_spring() {
+        let mut coords = [0.0; 7];
+        frame.coordinates(joint, &mut coords[..joint.nq()]);
+        frame.spring_force(joint, &coords[..joint.nq()], tau);
+    }
+    for (a, act) in model.actuators.iter().enumerate().filter(|(_, a)| a.joint == ji) {
+        let u = match act.ctrlrange {
+            Some((lo, hi)) => ctrl[a].clamp(lo, hi),
+            None => ctrl[a],
+        };
+        tau[act.dof] += act.gear * u;
+    }
+    if let (Some(q), false) = (forces.qfrc, joint.is_loop) {
+        for (i, t) in tau.iter_mut().enumerate() {
+            *t += q[joint.qvel_adr + i];
+        }
+    }
+}
+
+/// `applied_b += h J_bᵀ τ` for the joint's parent and child.
+fn add_jt_times(applied: &mut [[f64; 6]], joint: &Joint, jac: &[f64], tau: &[f64], h: f64) {
+    for (side, b) in [(0, joint.parent), (1, joint.child)] {
+        if b == 0 {
+            continue;
+        }
+        for (r, t) in tau.iter().enumerate() {
+            let row = &jac[12 * r + 6 * side..12 * r + 6 * side + 6];
+            for i in 0..6 {
+                applied[b][i] += h * row[i] * t;
+            }
+        }
+    }
+}
+
+/// Residual at the iterate `w`; also sets `ws.next_pose`. Returns its ∞-norm.
+pub(crate) fn evaluate(model: &Model, state: &State, ws: &mut Workspace, use_trial: bool) -> f64 {
+    let h = model.options.timestep;
+    let Workspace { w, w_trial, residual, next_pose, applied, jac_now, free_jac, free_adr, .. } = ws;
+    let w: &[f64] = if use_trial { w_trial } else { w };
+    for (b, body) in model.bodies.iter().enumerate().skip(1) {
+        let (v, om) = w_body(model, w, b);
+        let now = state.pose(b);
+        next_pose[b] = Pose { pos: now.pos + v * h, quat: now.quat * quat::step_map(&om, h) };
+        let prev = state.velocity(b);
+        let (lin, rot) = momentum_residual(body.mass, &body.inertia, h, (&prev.0, &prev.1), (&v, &om));
+        let o = body_slot(model, b);
+        for i in 0..3 {
+            residual[o + i] = lin[i] - applied[b][i];
+            residual[o + 3 + i] = rot[i] - applied[b][3 + i];
+        }
+    }
+    for (ji, joint) in model.joints.iter().enumerate() {
+        let ncon = joint.ncon();
+        if let Some(n) = model.topology.joint_node[ji] {
+            let (o, adr) = (model.topology.pattern.offset(n), model.topology.con_adr[ji]);
+            let k = &jac_now[12 * adr..12 * (adr + ncon)];
+            for (side, b) in [(0, joint.parent), (1, joint.child)] {
+                if b == 0 {
+                    continue;
+                }
+                let ob = body_slot(model, b);
+                for r in 0..ncon {
+                    let lam = w[o + r];
+                    for i in 0..6 {
+                        residual[ob + i] -= k[12 * r + 6 * side + i] * lam;
+                    }
+                }
+            }
+            let np = if joint.parent == 0 { Pose::world() } else { next_pose[joint.parent] };
+            let nc = if joint.child == 0 { Pose::world() } else { next_pose[joint.child] };
+            JointFrame::new(joint, &np, &nc).constraint(joint, &mut residual[o..o + ncon]);
+        }
+        if joint.has_damper() {
+            add_damper_residual(model, joint, &free_jac[free_adr[ji]..], w, residual, h);
+        }
+    }
+    residual.iter().fold(0.0f64, |m, r| if r.is_nan() { f64::NAN } else { m.max(r.abs()) })
+}
+
+/// `r_b += h J_bᵀ D (J_f w⁺)`: implicit damper impulses on both bodies.
+fn add_damper_residual(model: &Model, joint: &Joint, jf: &[f64], w: &[f64], residual: &mut [f64], h: f64) {
+    let (wp, wc) = (w_body(model, w, joint.parent), w_body(model, w, joint.child));
+    let x = [wp.0[0], wp.0[1], wp.0[2], wp.1[0], wp.1[1], wp.1[2], wc.0[0], wc.0[1], wc.0[2], wc.1[0], wc.1[1], wc.1[2]];
+    for r in 0..joint.nfree() {
+        let row = &jf[12 * r..12 * r + 12];
+        let rate: f64 = row.iter().zip(x.iter()).map(|(a, b)| a * b).sum();
+        let f = h * joint.damping[r] * rate;
+        for (side, b) in [(0, joint.parent), (1, joint.child)] {
+            if b > 0 {
+                let ob = body_slot(model, b);
+                for i in 0..6 {
+                    residual[ob + i] += row[6 * side + i] * f;
+                }
+            }
+        }
+    }
+}
+
+/// Newton matrix at the iterate of the last [`evaluate`] (which set `ws.next_pose`).
+pub(crate) fn assemble(model: &Model, ws: &mut Workspace) {
+    let h = model.options.timestep;
+    let t = &model.topology;
+    ws.matrix.zero();
+    for (b, body) in model.bodies.iter().enumerate().skip(1) {
+        let (_, om) = w_body(model, &ws.w, b);
+        ws.dphi[b] = quat::step_map_dphi_domega(&om, h);
+        let rj = rot_jacobian(&body.inertia, &om, h);
+        let d = &mut ws.matrix.values[t.body_diag[b]..t.body_diag[b] + 36];
+        for i in 0..3 {
+            d[6 * i + i] = body.mass;
+            for k in 0..3 {
+                d[6 * (3 + i) + 3 + k] = rj[(i, k)];
+            }
+        }
+    }
+    for (ji, joint) in model.joints.iter().enumerate() {
+        assemble_joint(model, ws, ji, joint, h);
+    }
+}
+
+fn assemble_joint(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h: f64) {
+    let t = &model.topology;
+    let ncon = joint.ncon();
+    if let Some(dj) = t.joint_diag[ji] {
+        let adr = t.con_adr[ji];
+        let np = if joint.parent == 0 { Pose::world() } else { ws.next_pose[joint.parent] };
+        let nc = if joint.child == 0 { Pose::world() } else { ws.next_pose[joint.child] };
+        let jn = &mut ws.jac_next[12 * adr..12 * (adr + ncon)];
+        JointFrame::new(joint, &np, &nc).constraint_jacobian(joint, jn);
+        for r in 0..ncon {
+            ws.matrix.values[dj + r * ncon + r] = -model.options.regularization;
+        }
+        for (side, b, blk) in [(0, joint.parent, &t.blocks[ji].jp), (1, joint.child, &t.blocks[ji].jc)] {
+            let Some((row_j, row_b)) = *blk else { continue };
+            let dphi: Matrix3<f64> = ws.dphi[b];
+            for r in 0..ncon {
+                let jrow = &ws.jac_next[12 * (adr + r) + 6 * side..12 * (adr + r) + 6 * side + 6];
+                let krow = &ws.jac_now[12 * (adr + r) + 6 * side..12 * (adr + r) + 6 * side + 6];
+                let vals = &mut ws.matrix.values;
+                // ∂k/∂v⁺ = h ∂k/∂δp ;  ∂k/∂ω⁺ = ∂k/∂δφ · ∂φ/∂ω
+                for i in 0..3 {
+                    vals[row_j + 6 * r + i] = h * jrow[i];
+                    vals[row_j + 6 * r + 3 + i] = (0..3).map(|k| jrow[3 + k] * dphi[(k, i)]).sum();
+                }
+                // ∂r_b/∂λ = -K_bᵀ
+                for i in 0..6 {
+                    vals[row_b + ncon * i + r] = -krow[i];
+                }
+            }
+        }
+    }
+    if joint.has_damper() {
+        add_damper_blocks(model, ws, ji, joint, h);
+    }
+}
+
+/// `h J_aᵀ D J_b` into the body blocks (a, b) for a, b ∈ {parent, child}.
+fn add_damper_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h: f64) {
+    let t = &model.topology;
+    let fa = ws.free_adr[ji];
+    let sides = [(0, joint.parent), (1, joint.child)];
+    for (sa, a) in sides {
+        for (sb, b) in sides {
+            if a == 0 || b == 0 {
+                continue;
+            }
+            let off = if a == b {
+                t.body_diag[a]
+            } else {
+                match t.blocks[ji].pc {
+                    Some((pc, cp)) => if sa == 0 { pc } else { cp },
+                    None => continue,
+                }
+            };
+            for r in 0..joint.nfree() {
+                let row = &ws.free_jac[fa + 12 * r..fa + 12 * r + 12];
+                let d = h * joint.damping[r];
+                for i in 0..6 {
+                    for k in 0..6 {
+                        ws.matrix.values[off + 6 * i + k] += d * row[6 * sa + i] * row[6 * sb + k];
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Scale `α` so no body's `|ω + α Δω|` exceeds the step map's limit.
+fn spin_limited_step(model: &Model, ws: &Workspace) -> f64 {
+    let limit = MAX_SPIN_FRACTION * quat::max_angular_speed(model.options.timestep);
+    let mut alpha: f64 = 1.0;
+    for b in 1..model.nbody() {
+        let (_, w) = w_body(model, &ws.w, b);
+        let (_, d) = w_body(model, &ws.delta, b);
+        while alpha > 1e-6 && (w + d * alpha).norm() > limit {
+            alpha *= 0.5;
+        }
+    }
+    alpha
+}
+
+/// Run Newton from the prepared iterate; leaves the solution in `ws.w` and `ws.next_pose`.
+pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
+    let opts = &model.options;
+    let mut norm = evaluate(model, state, ws, false);
+    let mut report = StepReport { status: SolveStatus::MaxIterations, iterations: 0, residual: norm, complementarity: 0.0 };
+    for it in 0..opts.max_iter {
+        if !norm.is_finite() {
+            report.status = SolveStatus::NonFinite;
+            break;
+        }
+        if norm <= opts.rtol {
+            report.status = SolveStatus::Converged;
+            break;
+        }
+        report.iterations = it + 1;
+        assemble(model, ws);
+        if ws.matrix.factor(&model.topology.pattern).is_err() {
+            report.status = SolveStatus::NonFinite;
+            break;
+        }
+        for (d, r) in ws.delta.iter_mut().zip(ws.residual.iter()) {
+            *d = -r;
+        }
+        ws.matrix.solve(&model.topology.pattern, &mut ws.delta);
+        let mut alpha = spin_limited_step(model, ws);
+        let mut accepted = false;
+        for _ in 0..=opts.max_ls {
+            for i in 0..ws.w.len() {
+                ws.w_trial[i] = ws.w[i] + alpha * ws.delta[i];
+            }
+            let trial = evaluate(model, state, ws, true);
+            if trial < norm || trial <= opts.rtol {
+                std::mem::swap(&mut ws.w, &mut ws.w_trial);
+                norm = trial;
+                accepted = true;
+                break;
+            }
+            alpha *= 0.5;
+        }
+        if !accepted {
+            norm = evaluate(model, state, ws, false);
+            report.status = SolveStatus::LineSearchFailed;
+            break;
+        }
+        if it + 1 == opts.max_iter && norm <= opts.rtol {
+            report.status = SolveStatus::Converged;
+        }
+    }
+    report.residual = norm;
+    report
+}
+
+/// Write the solved next state.
+pub(crate) fn write_state(model: &Model, state: &mut State, ws: &Workspace) {
+    for b in 1..model.nbody() {
+        let p = ws.next_pose[b];
+        state.set_pose(b, &Pose { pos: p.pos, quat: p.quat.normalize() });
+        let (v, w) = w_body(model, &ws.w, b);
+        state.set_velocity(b, &v, &w);
+    }
+    for (ji, joint) in model.joints.iter().enumerate() {
+        if let Some(n) = model.topology.joint_node[ji] {
+            let (o, adr) = (model.topology.pattern.offset(n), model.topology.con_adr[ji]);
+            state.joint_impulse[adr..adr + joint.ncon()].copy_from_slice(&ws.w[o..o + joint.ncon()]);
+        }
+    }
+    state.time += model.options.timestep;
+}

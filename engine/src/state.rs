@@ -1,0 +1,212 @@
+//! Per-rollout [`State`], reusable scratch [`Workspace`], and the per-step [`StepReport`].
+use nalgebra::{Matrix3, Vector3};
+
+use crate::joints::geometry::Pose;
+use crate::math::quat;
+use crate::model::Model;
+use crate::solver::graph_ldu::BlockMatrix;
+
+/// Everything that evolves. Flat arrays, body-major, world body included at index 0.
+///
+/// Velocities are the *midpoint* velocities of the variational integrator: the velocity that
+/// carried the previous configuration to this one (`v_{k-1/2}`), which is what the next step
+/// needs. They are used as the body velocities everywhere (minimal coordinates included).
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    /// Simulation time (s).
+    pub time: f64,
+    /// COM positions, world (m). Shape (nbody, 3).
+    pub com_pos: Vec<f64>,
+    /// Orientations `(w, x, y, z)`, body to world. Shape (nbody, 4).
+    pub quat: Vec<f64>,
+    /// COM linear midpoint velocities, world (m/s). Shape (nbody, 3).
+    pub com_linvel: Vec<f64>,
+    /// Angular midpoint velocities, body frame (rad/s). Shape (nbody, 3).
+    pub angvel_b: Vec<f64>,
+    /// Joint constraint impulses of the last step (N·s), the solver's warm start. Shape (ncon,).
+    pub joint_impulse: Vec<f64>,
+    pub(crate) topology_id: u64,
+}
+
+impl State {
+    /// The reference configuration at rest.
+    pub fn reference(model: &Model) -> State {
+        let n = model.nbody();
+        let mut s = State {
+            time: 0.0,
+            com_pos: vec![0.0; 3 * n],
+            quat: vec![0.0; 4 * n],
+            com_linvel: vec![0.0; 3 * n],
+            angvel_b: vec![0.0; 3 * n],
+            joint_impulse: vec![0.0; model.ncon()],
+            topology_id: model.topology_id(),
+        };
+        for (b, body) in model.bodies.iter().enumerate() {
+            s.set_pose(b, &body.ref_pose);
+        }
+        s
+    }
+
+    /// COM pose of body `b`.
+    pub fn pose(&self, b: usize) -> Pose {
+        Pose { pos: self.v3(&self.com_pos, b), quat: quat::from_wxyz(&self.quat[4 * b..4 * b + 4]) }
+    }
+
+    /// Set the COM pose of body `b`.
+    pub fn set_pose(&mut self, b: usize, pose: &Pose) {
+        self.com_pos[3 * b..3 * b + 3].copy_from_slice(pose.pos.as_slice());
+        self.quat[4 * b..4 * b + 4].copy_from_slice(quat::wxyz(&pose.quat).as_slice());
+    }
+
+    /// `(v, ω_b)` of body `b`.
+    pub fn velocity(&self, b: usize) -> (Vector3<f64>, Vector3<f64>) {
+        (self.v3(&self.com_linvel, b), self.v3(&self.angvel_b, b))
+    }
+
+    /// Set `(v, ω_b)` of body `b`.
+    pub fn set_velocity(&mut self, b: usize, v: &Vector3<f64>, w: &Vector3<f64>) {
+        self.com_linvel[3 * b..3 * b + 3].copy_from_slice(v.as_slice());
+        self.angvel_b[3 * b..3 * b + 3].copy_from_slice(w.as_slice());
+    }
+
+    fn v3(&self, a: &[f64], b: usize) -> Vector3<f64> {
+        Vector3::new(a[3 * b], a[3 * b + 1], a[3 * b + 2])
+    }
+
+    /// Whether this state was made for `model`'s topology.
+    pub fn check_model(&self, model: &Model) -> crate::Result<()> {
+        crate::ensure!(
+            self.topology_id == model.topology_id() && self.com_pos.len() == 3 * model.nbody(),
+            crate::Error::ModelMismatch {
+                detail: format!("state has {} bodies, model has {}", self.com_pos.len() / 3, model.nbody())
+            }
+        );
+        Ok(())
+    }
+
+    /// Body frame origins, world (MuJoCo's `xpos`). Shape (nbody, 3).
+    pub fn body_pos(&self, model: &Model) -> Vec<f64> {
+        let mut out = Vec::with_capacity(3 * model.nbody());
+        for (b, body) in model.bodies.iter().enumerate() {
+            let p = self.pose(b);
+            out.extend((p.pos - quat::rotation(&p.quat) * body.com).iter());
+        }
+        out
+    }
+
+    /// Linear velocities of the body frame origins, world (m/s). Shape (nbody, 3).
+    pub fn body_linvel(&self, model: &Model) -> Vec<f64> {
+        let mut out = Vec::with_capacity(3 * model.nbody());
+        for (b, body) in model.bodies.iter().enumerate() {
+            let r = quat::rotation(&self.pose(b).quat);
+            let (v, w) = self.velocity(b);
+            out.extend((v - (r * w).cross(&(r * body.com))).iter());
+        }
+        out
+    }
+
+    /// Angular velocities, world frame (rad/s). Shape (nbody, 3).
+    pub fn body_angvel(&self, _model: &Model) -> Vec<f64> {
+        let mut out = Vec::with_capacity(self.angvel_b.len());
+        for b in 0..self.angvel_b.len() / 3 {
+            out.extend((quat::rotation(&self.pose(b).quat) * self.velocity(b).1).iter());
+        }
+        out
+    }
+}
+
+/// How a solve ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolveStatus {
+    /// Residual below `rtol`.
+    Converged,
+    /// `max_iter` reached first.
+    MaxIterations,
+    /// No step length reduced the residual.
+    LineSearchFailed,
+    /// A NaN or infinity appeared (or a pivot was singular).
+    NonFinite,
+}
+
+impl SolveStatus {
+    /// Python-facing name (`"converged"`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            SolveStatus::Converged => "converged",
+            SolveStatus::MaxIterations => "max_iterations",
+            SolveStatus::LineSearchFailed => "line_search_failed",
+            SolveStatus::NonFinite => "non_finite",
+        }
+    }
+    /// Small integer code (0 = converged), for status arrays.
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+}
+
+/// What one step reports. Non-convergence is a result, never silent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepReport {
+    /// How the solve ended.
+    pub status: SolveStatus,
+    /// Newton iterations used.
+    pub iterations: usize,
+    /// Final ∞-norm of the residual.
+    pub residual: f64,
+    /// Final complementarity violation (0 without inequality constraints).
+    pub complementarity: f64,
+}
+
+/// Scratch memory for [`crate::step`], allocated once per model and reused (no allocation in
+/// steady state).
+pub struct Workspace {
+    pub(crate) matrix: BlockMatrix,
+    /// Newton unknowns `[v⁺, ω⁺ per moving body; λ per constraint row]`, node layout.
+    pub(crate) w: Vec<f64>,
+    pub(crate) w_trial: Vec<f64>,
+    pub(crate) residual: Vec<f64>,
+    pub(crate) delta: Vec<f64>,
+    /// Applied impulses per body, `[h(m g + f); h τ_b]` plus joint springs and inputs.
+    pub(crate) applied: Vec<[f64; 6]>,
+    /// `∂φ/∂ω` at the trial next configuration, per body.
+    pub(crate) dphi: Vec<Matrix3<f64>>,
+    pub(crate) next_pose: Vec<Pose>,
+    /// Constraint Jacobian at the current configuration (impulse map), `ncon × 12` rows.
+    pub(crate) jac_now: Vec<f64>,
+    /// Constraint Jacobian at the trial next configuration.
+    pub(crate) jac_next: Vec<f64>,
+    /// Free-coordinate Jacobian at the current configuration, per joint `nfree × 12`.
+    pub(crate) free_jac: Vec<f64>,
+    pub(crate) free_adr: Vec<usize>,
+    pub(crate) topology_id: u64,
+}
+
+impl Workspace {
+    /// Scratch sized for `model`.
+    pub fn new(model: &Model) -> Workspace {
+        let t = &model.topology;
+        let n = t.pattern.total_dim();
+        let nb = model.nbody();
+        let mut free_adr = Vec::with_capacity(model.njoint());
+        let mut nfree = 0;
+        for j in &model.joints {
+            free_adr.push(nfree);
+            nfree += j.nfree() * 12;
+        }
+        Workspace {
+            matrix: BlockMatrix::new(&t.pattern),
+            w: vec![0.0; n],
+            w_trial: vec![0.0; n],
+            residual: vec![0.0; n],
+            delta: vec![0.0; n],
+            applied: vec![[0.0; 6]; nb],
+            dphi: vec![Matrix3::zeros(); nb],
+            next_pose: vec![Pose::world(); nb],
+            jac_now: vec![0.0; 12 * t.ncon],
+            jac_next: vec![0.0; 12 * t.ncon],
+            free_jac: vec![0.0; nfree],
+            free_adr,
+            topology_id: model.topology_id(),
+        }
+    }
+}

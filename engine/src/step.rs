@@ -1,0 +1,85 @@
+//! `step` and `rollout`: the only place that sequences the modules (validate, prepare, solve,
+//! write back).
+use crate::model::Model;
+use crate::solver::newton;
+pub use crate::solver::newton::AppliedForces;
+use crate::state::{State, StepReport, Workspace};
+use crate::{Error, Result, ensure};
+
+/// Check a step's inputs: sizes, finiteness, and that state and workspace belong to `model`.
+pub fn validate_inputs(model: &Model, state: &State, ws: &Workspace, ctrl: &[f64], forces: &AppliedForces) -> Result<()> {
+    state.check_model(model)?;
+    ensure!(
+        ws.topology_id == model.topology_id(),
+        Error::ModelMismatch { detail: "workspace was built for another model".into() }
+    );
+    ensure!(ctrl.len() == model.nu(), Error::shape("ctrl", &[model.nu()], &[ctrl.len()]));
+    if let Some(i) = ctrl.iter().position(|x| !x.is_finite()) {
+        return Err(Error::input(format!("ctrl[{i}]"), ctrl[i], "must be finite"));
+    }
+    if let Some(q) = forces.qfrc {
+        ensure!(q.len() == model.nv, Error::shape("qfrc_applied", &[model.nv], &[q.len()]));
+        ensure!(q.iter().all(|x| x.is_finite()), Error::input("qfrc_applied", q, "must be finite"));
+    }
+    if let Some(x) = forces.xfrc {
+        ensure!(x.len() == 6 * model.nbody(), Error::shape("xfrc_applied", &[model.nbody(), 6], &[x.len()]));
+        ensure!(x.iter().all(|v| v.is_finite()), Error::input("xfrc_applied", x, "must be finite"));
+    }
+    Ok(())
+}
+
+/// Advance `state` by one time step with controls `ctrl` (length `nu`).
+///
+/// Returns a report; a solve that did not converge still writes its last iterate into `state`
+/// (so it can be inspected) and says so in [`StepReport::status`].
+///
+/// ```
+/// use ukemi_engine::{BodySpec, JointKind, JointSpec, ModelBuilder, State, Workspace, step};
+/// let model = ModelBuilder::new()
+///     .body(BodySpec::new("ball", 1.0, [0.1, 0.1, 0.1]).pos([0.0, 0.0, 1.0]))
+///     .joint(JointSpec::new("free", JointKind::Floating, "world", "ball"))
+///     .compile()
+///     .unwrap();
+/// let mut state = State::reference(&model);
+/// let mut ws = Workspace::new(&model);
+/// let report = step(&model, &mut state, &mut ws, &[]).unwrap();
+/// assert_eq!(report.status.name(), "converged");
+/// // free fall: z = 1 - g h² after one step of the variational integrator
+/// assert!((state.com_pos[5] - (1.0 - 9.81 * 0.01 * 0.01)).abs() < 1e-12);
+/// ```
+pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, ctrl: &[f64]) -> Result<StepReport> {
+    step_with(model, state, ws, ctrl, &AppliedForces::default())
+}
+
+/// [`step`] with applied generalized forces and body wrenches.
+pub fn step_with(model: &Model, state: &mut State, ws: &mut Workspace, ctrl: &[f64], forces: &AppliedForces) -> Result<StepReport> {
+    validate_inputs(model, state, ws, ctrl, forces)?;
+    newton::prepare(model, state, ws, ctrl, forces);
+    let report = newton::solve(model, state, ws);
+    newton::write_state(model, state, ws);
+    Ok(report)
+}
+
+/// Step `nstep` times with controls `ctrls` (row-major `(nstep, nu)`), calling `record` after every
+/// step with the new state and its report. Stops at the first step that fails to converge when
+/// `stop_on_failure` is set (the failing step is still recorded).
+pub fn rollout(
+    model: &Model,
+    state: &mut State,
+    ws: &mut Workspace,
+    ctrls: &[f64],
+    nstep: usize,
+    stop_on_failure: bool,
+    mut record: impl FnMut(usize, &State, &StepReport),
+) -> Result<()> {
+    let nu = model.nu();
+    ensure!(ctrls.len() == nstep * nu, Error::shape("ctrls", &[nstep, nu], &[ctrls.len() / nu.max(1), nu]));
+    for k in 0..nstep {
+        let report = step(model, state, ws, &ctrls[k * nu..(k + 1) * nu])?;
+        record(k, state, &report);
+        if stop_on_failure && report.status != crate::SolveStatus::Converged {
+            break;
+        }
+    }
+    Ok(())
+}
