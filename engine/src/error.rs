@@ -51,16 +51,36 @@ pub type Result<T> = std::result::Result<T, Error>;
 
 impl Error {
     /// Shorthand for [`Error::InvalidModel`].
-    pub fn model(field: impl Into<String>, value: impl std::fmt::Debug, reason: impl Into<String>) -> Self {
-        Error::InvalidModel { field: field.into(), value: format!("{value:?}"), reason: reason.into() }
+    pub fn model(
+        field: impl Into<String>,
+        value: impl std::fmt::Debug,
+        reason: impl Into<String>,
+    ) -> Self {
+        Error::InvalidModel {
+            field: field.into(),
+            value: format!("{value:?}"),
+            reason: reason.into(),
+        }
     }
     /// Shorthand for [`Error::InvalidInput`].
-    pub fn input(field: impl Into<String>, value: impl std::fmt::Debug, reason: impl Into<String>) -> Self {
-        Error::InvalidInput { field: field.into(), value: format!("{value:?}"), reason: reason.into() }
+    pub fn input(
+        field: impl Into<String>,
+        value: impl std::fmt::Debug,
+        reason: impl Into<String>,
+    ) -> Self {
+        Error::InvalidInput {
+            field: field.into(),
+            value: format!("{value:?}"),
+            reason: reason.into(),
+        }
     }
     /// Shorthand for [`Error::Shape`].
     pub fn shape(name: impl Into<String>, expected: &[usize], got: &[usize]) -> Self {
-        Error::Shape { name: name.into(), expected: expected.to_vec(), got: got.to_vec() }
+        Error::Shape {
+            name: name.into(),
+            expected: expected.to_vec(),
+            got: got.to_vec(),
+        }
     }
 }
 

@@ -12,7 +12,9 @@ use crate::state::State;
 
 /// Discrete linear momentum, world (kg·m/s).
 pub fn linear_momentum(model: &Model, state: &State) -> Vector3<f64> {
-    (1..model.nbody()).map(|b| state.velocity(b).0 * model.bodies[b].mass).sum()
+    (1..model.nbody())
+        .map(|b| state.velocity(b).0 * model.bodies[b].mass)
+        .sum()
 }
 
 /// Discrete angular momentum about the world origin, world frame (kg·m²/s).
@@ -23,7 +25,8 @@ pub fn angular_momentum(model: &Model, state: &State) -> Vector3<f64> {
             let body = &model.bodies[b];
             let pose = state.pose(b);
             let (v, w) = state.velocity(b);
-            quat::rotation(&pose.quat) * angular_momentum_backward(&body.inertia, &w, h) + pose.pos.cross(&(v * body.mass))
+            quat::rotation(&pose.quat) * angular_momentum_backward(&body.inertia, &w, h)
+                + pose.pos.cross(&(v * body.mass))
         })
         .sum()
 }
@@ -41,5 +44,44 @@ pub fn kinetic_energy(model: &Model, state: &State) -> f64 {
 
 /// Gravitational potential energy `-Σ m g·p` (J).
 pub fn potential_energy(model: &Model, state: &State) -> f64 {
-    (1..model.nbody()).map(|b| -model.bodies[b].mass * model.options.gravity.dot(&state.pose(b).pos)).sum()
+    (1..model.nbody())
+        .map(|b| -model.bodies[b].mass * model.options.gravity.dot(&state.pose(b).pos))
+        .sum()
+}
+
+/// Discrete total energy of the step that led to `state`: midpoint kinetic energy plus the mean
+/// of the gravitational potential at the previous (`p - h v`) and current positions, i.e. the
+/// energy of the trapezoidal discrete Lagrangian, which the integrator keeps bounded (J).
+/// Joint springs are not included; see [`spring_energy`].
+pub fn total_energy(model: &Model, state: &State) -> f64 {
+    let h = model.options.timestep;
+    let g = model.options.gravity;
+    let pe: f64 = (1..model.nbody())
+        .map(|b| {
+            let p = state.pose(b).pos;
+            let v = state.velocity(b).0;
+            -model.bodies[b].mass * g.dot(&(p - v * (0.5 * h)))
+        })
+        .sum();
+    kinetic_energy(model, state) + pe + spring_energy(model, state)
+}
+
+/// Potential energy stored in joint springs at the current configuration (J).
+pub fn spring_energy(model: &Model, state: &State) -> f64 {
+    use crate::joints::geometry::{JointFrame, Pose};
+    let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
+    let mut e = 0.0;
+    for j in model.joints.iter().filter(|j| j.has_spring()) {
+        let frame = JointFrame::new(j, &pose(j.parent), &pose(j.child));
+        let mut q = [0.0; 7];
+        let mut f = [0.0; 6];
+        frame.coordinates(j, &mut q[..j.nq()]);
+        frame.spring_force(j, &q[..j.nq()], &mut f[..j.nfree()]);
+        // ½ k x² = ½ f² / k per dof
+        e += (0..j.nfree())
+            .filter(|&i| j.stiffness[i] > 0.0)
+            .map(|i| 0.5 * f[i] * f[i] / j.stiffness[i])
+            .sum::<f64>();
+    }
+    e
 }

@@ -49,7 +49,10 @@ impl State {
 
     /// COM pose of body `b`.
     pub fn pose(&self, b: usize) -> Pose {
-        Pose { pos: self.v3(&self.com_pos, b), quat: quat::from_wxyz(&self.quat[4 * b..4 * b + 4]) }
+        Pose {
+            pos: self.v3(&self.com_pos, b),
+            quat: quat::from_wxyz(&self.quat[4 * b..4 * b + 4]),
+        }
     }
 
     /// Set the COM pose of body `b`.
@@ -78,7 +81,11 @@ impl State {
         crate::ensure!(
             self.topology_id == model.topology_id() && self.com_pos.len() == 3 * model.nbody(),
             crate::Error::ModelMismatch {
-                detail: format!("state has {} bodies, model has {}", self.com_pos.len() / 3, model.nbody())
+                detail: format!(
+                    "state has {} bodies, model has {}",
+                    self.com_pos.len() / 3,
+                    model.nbody()
+                )
             }
         );
         Ok(())

@@ -7,23 +7,50 @@ use crate::state::{State, StepReport, Workspace};
 use crate::{Error, Result, ensure};
 
 /// Check a step's inputs: sizes, finiteness, and that state and workspace belong to `model`.
-pub fn validate_inputs(model: &Model, state: &State, ws: &Workspace, ctrl: &[f64], forces: &AppliedForces) -> Result<()> {
+pub fn validate_inputs(
+    model: &Model,
+    state: &State,
+    ws: &Workspace,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+) -> Result<()> {
     state.check_model(model)?;
     ensure!(
         ws.topology_id == model.topology_id(),
-        Error::ModelMismatch { detail: "workspace was built for another model".into() }
+        Error::ModelMismatch {
+            detail: "workspace was built for another model".into()
+        }
     );
-    ensure!(ctrl.len() == model.nu(), Error::shape("ctrl", &[model.nu()], &[ctrl.len()]));
+    ensure!(
+        ctrl.len() == model.nu(),
+        Error::shape("ctrl", &[model.nu()], &[ctrl.len()])
+    );
     if let Some(i) = ctrl.iter().position(|x| !x.is_finite()) {
-        return Err(Error::input(format!("ctrl[{i}]"), ctrl[i], "must be finite"));
+        return Err(Error::input(
+            format!("ctrl[{i}]"),
+            ctrl[i],
+            "must be finite",
+        ));
     }
     if let Some(q) = forces.qfrc {
-        ensure!(q.len() == model.nv, Error::shape("qfrc_applied", &[model.nv], &[q.len()]));
-        ensure!(q.iter().all(|x| x.is_finite()), Error::input("qfrc_applied", q, "must be finite"));
+        ensure!(
+            q.len() == model.nv,
+            Error::shape("qfrc_applied", &[model.nv], &[q.len()])
+        );
+        ensure!(
+            q.iter().all(|x| x.is_finite()),
+            Error::input("qfrc_applied", q, "must be finite")
+        );
     }
     if let Some(x) = forces.xfrc {
-        ensure!(x.len() == 6 * model.nbody(), Error::shape("xfrc_applied", &[model.nbody(), 6], &[x.len()]));
-        ensure!(x.iter().all(|v| v.is_finite()), Error::input("xfrc_applied", x, "must be finite"));
+        ensure!(
+            x.len() == 6 * model.nbody(),
+            Error::shape("xfrc_applied", &[model.nbody(), 6], &[x.len()])
+        );
+        ensure!(
+            x.iter().all(|v| v.is_finite()),
+            Error::input("xfrc_applied", x, "must be finite")
+        );
     }
     Ok(())
 }
@@ -47,12 +74,23 @@ pub fn validate_inputs(model: &Model, state: &State, ws: &Workspace, ctrl: &[f64
 /// // free fall: z = 1 - g h² after one step of the variational integrator
 /// assert!((state.com_pos[5] - (1.0 - 9.81 * 0.01 * 0.01)).abs() < 1e-12);
 /// ```
-pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, ctrl: &[f64]) -> Result<StepReport> {
+pub fn step(
+    model: &Model,
+    state: &mut State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+) -> Result<StepReport> {
     step_with(model, state, ws, ctrl, &AppliedForces::default())
 }
 
 /// [`step`] with applied generalized forces and body wrenches.
-pub fn step_with(model: &Model, state: &mut State, ws: &mut Workspace, ctrl: &[f64], forces: &AppliedForces) -> Result<StepReport> {
+pub fn step_with(
+    model: &Model,
+    state: &mut State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+) -> Result<StepReport> {
     validate_inputs(model, state, ws, ctrl, forces)?;
     newton::prepare(model, state, ws, ctrl, forces);
     let report = newton::solve(model, state, ws);
@@ -73,7 +111,10 @@ pub fn rollout(
     mut record: impl FnMut(usize, &State, &StepReport),
 ) -> Result<()> {
     let nu = model.nu();
-    ensure!(ctrls.len() == nstep * nu, Error::shape("ctrls", &[nstep, nu], &[ctrls.len() / nu.max(1), nu]));
+    ensure!(
+        ctrls.len() == nstep * nu,
+        Error::shape("ctrls", &[nstep, nu], &[ctrls.len() / nu.max(1), nu])
+    );
     for k in 0..nstep {
         let report = step(model, state, ws, &ctrls[k * nu..(k + 1) * nu])?;
         record(k, state, &report);

@@ -23,14 +23,22 @@ pub fn step_scalar(omega: &Vector3<f64>, h: f64) -> f64 {
 
 /// Forward discrete angular momentum (body frame at the start of the step):
 /// `c(ω) J ω + (h/2) ω × J ω`.
-pub fn angular_momentum_forward(inertia: &Matrix3<f64>, omega: &Vector3<f64>, h: f64) -> Vector3<f64> {
+pub fn angular_momentum_forward(
+    inertia: &Matrix3<f64>,
+    omega: &Vector3<f64>,
+    h: f64,
+) -> Vector3<f64> {
     let jw = inertia * omega;
     jw * step_scalar(omega, h) + omega.cross(&jw) * (0.5 * h)
 }
 
 /// Backward discrete angular momentum (body frame at the end of the step):
 /// `c(ω) J ω - (h/2) ω × J ω`. Equal to the forward momentum rotated by the step (Noether).
-pub fn angular_momentum_backward(inertia: &Matrix3<f64>, omega: &Vector3<f64>, h: f64) -> Vector3<f64> {
+pub fn angular_momentum_backward(
+    inertia: &Matrix3<f64>,
+    omega: &Vector3<f64>,
+    h: f64,
+) -> Vector3<f64> {
     let jw = inertia * omega;
     jw * step_scalar(omega, h) - omega.cross(&jw) * (0.5 * h)
 }
@@ -44,7 +52,8 @@ pub fn momentum_residual(
     (linvel, angvel): (&Vector3<f64>, &Vector3<f64>),
 ) -> (Vector3<f64>, Vector3<f64>) {
     let lin = (linvel - linvel_prev) * mass;
-    let rot = angular_momentum_forward(inertia, angvel, h) - angular_momentum_backward(inertia, angvel_prev, h);
+    let rot = angular_momentum_forward(inertia, angvel, h)
+        - angular_momentum_backward(inertia, angvel_prev, h);
     (lin, rot)
 }
 
@@ -52,7 +61,8 @@ pub fn momentum_residual(
 pub fn rot_jacobian(inertia: &Matrix3<f64>, angvel: &Vector3<f64>, h: f64) -> Matrix3<f64> {
     let c = step_scalar(angvel, h).max(1e-12);
     let jw = inertia * angvel;
-    inertia * c - jw * angvel.transpose() * (0.25 * h * h / c) + (skew(angvel) * inertia - skew(&jw)) * (0.5 * h)
+    inertia * c - jw * angvel.transpose() * (0.25 * h * h / c)
+        + (skew(angvel) * inertia - skew(&jw)) * (0.5 * h)
 }
 
 #[cfg(test)]
@@ -71,7 +81,9 @@ mod tests {
         let jac = rot_jacobian(&j, &w, h);
         for i in 0..3 {
             let e = Vector3::ith(i, 1e-6);
-            let fd = (angular_momentum_forward(&j, &(w + e), h) - angular_momentum_forward(&j, &(w - e), h)) / 2e-6;
+            let fd = (angular_momentum_forward(&j, &(w + e), h)
+                - angular_momentum_forward(&j, &(w - e), h))
+                / 2e-6;
             assert!((fd - jac.column(i)).norm() < 1e-7, "{i}");
         }
     }

@@ -20,7 +20,11 @@ fn pose_of(state: &State, b: usize) -> Pose {
 }
 
 fn velocity_of(state: &State, b: usize) -> [f64; 6] {
-    let (v, w) = if b == 0 { (Vector3::zeros(), Vector3::zeros()) } else { state.velocity(b) };
+    let (v, w) = if b == 0 {
+        (Vector3::zeros(), Vector3::zeros())
+    } else {
+        state.velocity(b)
+    };
     [v[0], v[1], v[2], w[0], w[1], w[2]]
 }
 
@@ -64,18 +68,43 @@ pub fn qvel(model: &Model, state: &State) -> Vec<f64> {
 
 /// Check `qpos`/`qvel` lengths, finiteness and quaternion norms.
 pub fn validate_minimal(model: &Model, qpos: &[f64], qvel: &[f64]) -> Result<()> {
-    ensure!(qpos.len() == model.nq, Error::shape("qpos", &[model.nq], &[qpos.len()]));
-    ensure!(qvel.len() == model.nv, Error::shape("qvel", &[model.nv], &[qvel.len()]));
+    ensure!(
+        qpos.len() == model.nq,
+        Error::shape("qpos", &[model.nq], &[qpos.len()])
+    );
+    ensure!(
+        qvel.len() == model.nv,
+        Error::shape("qvel", &[model.nv], &[qvel.len()])
+    );
     if let Some(i) = qpos.iter().position(|x| !x.is_finite()) {
-        return Err(Error::input(format!("qpos[{i}]"), qpos[i], "must be finite"));
+        return Err(Error::input(
+            format!("qpos[{i}]"),
+            qpos[i],
+            "must be finite",
+        ));
     }
     if let Some(i) = qvel.iter().position(|x| !x.is_finite()) {
-        return Err(Error::input(format!("qvel[{i}]"), qvel[i], "must be finite"));
+        return Err(Error::input(
+            format!("qvel[{i}]"),
+            qvel[i],
+            "must be finite",
+        ));
     }
-    for j in model.joints.iter().filter(|j| !j.is_loop && j.rot.nq() == 4) {
+    for j in model
+        .joints
+        .iter()
+        .filter(|j| !j.is_loop && j.rot.nq() == 4)
+    {
         let a = j.qpos_adr + j.ntrans;
         let n = qpos[a..a + 4].iter().map(|x| x * x).sum::<f64>().sqrt();
-        ensure!(n > 1e-9, Error::input(format!("qpos[{a}..{}] (joint {})", a + 4, j.name), &qpos[a..a + 4], "quaternion must be non-zero"));
+        ensure!(
+            n > 1e-9,
+            Error::input(
+                format!("qpos[{a}..{}] (joint {})", a + 4, j.name),
+                &qpos[a..a + 4],
+                "quaternion must be non-zero"
+            )
+        );
     }
     Ok(())
 }
@@ -100,13 +129,20 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
         let delta = Vector3::new(delta[0], delta[1], delta[2]);
         let a_p = parent.pos + rot_p * j.parent_anchor;
         let a_c = a_p + rot_pj * delta;
-        let child = Pose { pos: a_c - rot_c * j.child_anchor, quat: child_quat };
+        let child = Pose {
+            pos: a_c - rot_c * j.child_anchor,
+            quat: child_quat,
+        };
         state.set_pose(j.child, &child);
         // velocities: ω_c = R_jᵀ R_offᵀ ω_p + S qvel_rot;  ȧ_c = ȧ_p + R_pj Δ̇ + ω_p × (R_pj Δ)
         let vp = velocity_of(state, j.parent);
-        let (v_p, w_p) = (Vector3::new(vp[0], vp[1], vp[2]), Vector3::new(vp[3], vp[4], vp[5]));
+        let (v_p, w_p) = (
+            Vector3::new(vp[0], vp[1], vp[2]),
+            Vector3::new(vp[3], vp[4], vp[5]),
+        );
         let rot_j = quat::rotation(&qj);
-        let w_c = rot_j.transpose() * quat::rotation(&j.offset).transpose() * w_p + joint_angvel(&j.rot, &qj, &qd[j.ntrans..]);
+        let w_c = rot_j.transpose() * quat::rotation(&j.offset).transpose() * w_p
+            + joint_angvel(&j.rot, &qj, &qd[j.ntrans..]);
         let ddelta = free * nalgebra::DVector::from_column_slice(&qd[..j.ntrans]);
         let ddelta = Vector3::new(ddelta[0], ddelta[1], ddelta[2]);
         let w_pw = rot_p * w_p;

@@ -21,7 +21,10 @@ pub struct Pose {
 impl Pose {
     /// The world frame.
     pub fn world() -> Self {
-        Pose { pos: Vector3::zeros(), quat: quat::identity() }
+        Pose {
+            pos: Vector3::zeros(),
+            quat: quat::identity(),
+        }
     }
 }
 
@@ -53,7 +56,15 @@ impl JointFrame {
         let a_p = parent.pos + rot_p * joint.parent_anchor;
         let a_c = child.pos + rot_c * joint.child_anchor;
         let delta = rot_pj.transpose() * (a_c - a_p);
-        JointFrame { rot_p, rot_c, rot_off, rot_pj, rot_j: quat::rotation(&qj), qj, delta }
+        JointFrame {
+            rot_p,
+            rot_c,
+            rot_off,
+            rot_pj,
+            rot_j: quat::rotation(&qj),
+            qj,
+            delta,
+        }
     }
 
     /// `∂Δ/∂(δp_p, δφ_p, δp_c, δφ_c)`, 3 × 12.
@@ -62,10 +73,12 @@ impl JointFrame {
         let mut m = SMatrix::<f64, 3, 12>::zeros();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-t));
         // δΔ = R_pjᵀ R_p skew(r_p) δφ_p + skew(Δ) R_offᵀ δφ_p   (anchor arm and frame rotation)
-        let dp = t * self.rot_p * skew(&joint.parent_anchor) + skew(&self.delta) * self.rot_off.transpose();
+        let dp = t * self.rot_p * skew(&joint.parent_anchor)
+            + skew(&self.delta) * self.rot_off.transpose();
         m.fixed_view_mut::<3, 3>(0, 3).copy_from(&dp);
         m.fixed_view_mut::<3, 3>(0, 6).copy_from(&t);
-        m.fixed_view_mut::<3, 3>(0, 9).copy_from(&(-t * self.rot_c * skew(&joint.child_anchor)));
+        m.fixed_view_mut::<3, 3>(0, 9)
+            .copy_from(&(-t * self.rot_c * skew(&joint.child_anchor)));
         m
     }
 
@@ -228,7 +241,11 @@ impl JointFrame {
 pub fn wrap_angle(a: f64) -> f64 {
     let two_pi = std::f64::consts::TAU;
     let w = a - two_pi * (a / two_pi).round();
-    if w <= -std::f64::consts::PI { w + two_pi } else { w }
+    if w <= -std::f64::consts::PI {
+        w + two_pi
+    } else {
+        w
+    }
 }
 
 /// Joint rotation `q_joint` from rotational coordinates (inverse of [`JointFrame::coordinates`]).

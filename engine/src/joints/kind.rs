@@ -13,19 +13,19 @@ use crate::math::spatial::basis_from_axis;
 /// | `Fixed` | – | – |
 /// | `Prismatic` | a | – |
 /// | `Planar` | b, c (plane normal a) | – |
-/// | `FixedOrientation` | a, b, c | – |
+/// | `FixedOrientation` | x, y, z | – |
 /// | `Revolute` | – | about a |
 /// | `Cylindrical` | a | about a |
 /// | `PlanarAxis` | b, c | about a |
-/// | `FreeRevolute` | a, b, c | about a |
+/// | `FreeRevolute` | x, y, z | about a |
 /// | `Orbital` | – | about b then c (universal) |
 /// | `PrismaticOrbital` | a | about b then c |
 /// | `PlanarOrbital` | b, c | about b then c |
-/// | `FreeOrbital` | a, b, c | about b then c |
+/// | `FreeOrbital` | x, y, z | about b then c |
 /// | `Spherical` | – | ball (quaternion) |
 /// | `CylindricalFree` | a | ball |
 /// | `PlanarFree` | b, c | ball |
-/// | `Floating` | a, b, c | ball |
+/// | `Floating` | x, y, z | ball |
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[allow(missing_docs)]
 pub enum JointKind {
@@ -117,14 +117,23 @@ impl JointKind {
     /// Translational basis (columns, free first) and rotational dofs for a unit `axis`.
     pub fn frame(self, axis: &Vector3<f64>) -> (nalgebra::Matrix3<f64>, RotDofs) {
         let m = basis_from_axis(axis);
-        let (a, b, c) = (m.column(0).into_owned(), m.column(1).into_owned(), m.column(2).into_owned());
+        let (a, b, c) = (
+            m.column(0).into_owned(),
+            m.column(1).into_owned(),
+            m.column(2).into_owned(),
+        );
+        // three free translations are the parent frame's x, y, z (MuJoCo's free joint)
         let trans = match self.ntrans() {
             2 => nalgebra::Matrix3::from_columns(&[b, c, a]),
+            3 => nalgebra::Matrix3::identity(),
             _ => m,
         };
         let rot = match self.nrot() {
             0 => RotDofs::Locked,
-            1 => RotDofs::Hinge { axis: a, perp: [b, c] },
+            1 => RotDofs::Hinge {
+                axis: a,
+                perp: [b, c],
+            },
             2 => RotDofs::Universal { a1: b, a2: c },
             _ => RotDofs::Ball,
         };

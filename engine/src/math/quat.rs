@@ -100,7 +100,11 @@ pub fn axis_angle(axis: &Vector3<f64>, angle: f64) -> Quat {
 
 /// Rotation vector (log map) of a unit quaternion, with `w ≥ 0` chosen so the angle is in [0, π].
 pub fn rotation_vector(q: &Quat) -> Vector3<f64> {
-    let (w, v) = if q.w < 0.0 { (-q.w, -vec(q)) } else { (q.w, vec(q)) };
+    let (w, v) = if q.w < 0.0 {
+        (-q.w, -vec(q))
+    } else {
+        (q.w, vec(q))
+    };
     let s = v.norm();
     if s < 1e-12 {
         // angle ≈ 2 s, direction v / s: first-order series of 2 atan2(s, w) v / s
@@ -128,8 +132,11 @@ pub fn step_map(omega: &Vector3<f64>, h: f64) -> Quat {
 /// `q_next ⊗ [1, δφ/2] = q ⊗ f(ω + δω)` gives `δφ = 2 V L(f)ᵀ (∂f/∂ω) δω`, which equals
 /// `c h I - (h²/2) skew(ω) + (h³/4c) ω ωᵀ` with `c = sqrt(1 - |hω/2|²)`.
 pub fn step_map_dphi_domega(omega: &Vector3<f64>, h: f64) -> Matrix3<f64> {
-    let c = (1.0 - (omega * (0.5 * h)).norm_squared()).max(1e-300).sqrt();
-    Matrix3::identity() * (c * h) - skew(omega) * (0.5 * h * h) + omega * omega.transpose() * (h * h * h / (4.0 * c))
+    let c = (1.0 - (omega * (0.5 * h)).norm_squared())
+        .max(1e-300)
+        .sqrt();
+    Matrix3::identity() * (c * h) - skew(omega) * (0.5 * h * h)
+        + omega * omega.transpose() * (h * h * h / (4.0 * c))
 }
 
 #[cfg(test)]
@@ -187,7 +194,11 @@ mod tests {
             let dp = conj(&qn) * (base * step_map(&wp, h));
             let dm = conj(&qn) * (base * step_map(&wm, h));
             let fd = (vec(&dp) - vec(&dm)) * (2.0 / (2.0 * eps));
-            assert!((fd - d.column(i)).norm() < 1e-8, "column {i}: {fd} vs {}", d.column(i));
+            assert!(
+                (fd - d.column(i)).norm() < 1e-8,
+                "column {i}: {fd} vs {}",
+                d.column(i)
+            );
         }
     }
 }

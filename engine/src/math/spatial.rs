@@ -37,7 +37,12 @@ mod tests {
 
     #[test]
     fn basis_is_orthonormal_and_right_handed() {
-        for a in [Vector3::z(), Vector3::x(), Vector3::y(), Vector3::new(1.0, 2.0, -0.5).normalize()] {
+        for a in [
+            Vector3::z(),
+            Vector3::x(),
+            Vector3::y(),
+            Vector3::new(1.0, 2.0, -0.5).normalize(),
+        ] {
             let m = basis_from_axis(&a);
             assert!((m.transpose() * m - Matrix3::identity()).norm() < 1e-14);
             assert!((m.determinant() - 1.0).abs() < 1e-14);

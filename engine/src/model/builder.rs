@@ -217,7 +217,11 @@ impl ModelBuilder {
         for (i, spec) in self.joints.iter().enumerate() {
             ensure!(
                 !self.joints[..i].iter().any(|o| o.name == spec.name),
-                Error::model(format!("joint[{}].name", spec.name), &spec.name, "duplicate joint name")
+                Error::model(
+                    format!("joint[{}].name", spec.name),
+                    &spec.name,
+                    "duplicate joint name"
+                )
             );
             joints.push(compile_joint(spec, &names, &bodies)?);
         }
@@ -228,7 +232,16 @@ impl ModelBuilder {
         let actuators = self.compile_actuators(&joints)?;
         let nq = joints.iter().filter(|j| !j.is_loop).map(Joint::nq).sum();
         let nv = joints.iter().filter(|j| !j.is_loop).map(Joint::nfree).sum();
-        let mut model = Model { options: self.options.clone(), bodies, joints, actuators, nq, nv, qpos0: vec![], topology };
+        let mut model = Model {
+            options: self.options.clone(),
+            bodies,
+            joints,
+            actuators,
+            nq,
+            nv,
+            qpos0: vec![],
+            topology,
+        };
         let reference = crate::State::reference(&model);
         model.qpos0 = crate::joints::coordinates::qpos(&model, &reference);
         for j in 0..model.joints.len() {
@@ -253,12 +266,22 @@ impl ModelBuilder {
         let mut out = vec![world];
         for spec in &self.bodies {
             let f = |field: &str| format!("body[{}].{field}", spec.name);
-            ensure!(!spec.name.is_empty(), Error::model("body.name", "", "must not be empty"));
+            ensure!(
+                !spec.name.is_empty(),
+                Error::model("body.name", "", "must not be empty")
+            );
             ensure!(
                 !out.iter().any(|b| b.name == spec.name),
-                Error::model(f("name"), &spec.name, "duplicate body name (\"world\" is reserved)")
+                Error::model(
+                    f("name"),
+                    &spec.name,
+                    "duplicate body name (\"world\" is reserved)"
+                )
             );
-            ensure!(spec.mass.is_finite() && spec.mass > 0.0, Error::model(f("mass"), spec.mass, "must be finite and > 0"));
+            ensure!(
+                spec.mass.is_finite() && spec.mass > 0.0,
+                Error::model(f("mass"), spec.mass, "must be finite and > 0")
+            );
             check_inertia(&spec.inertia, &f("inertia"))?;
             check_finite(spec.pos.as_slice(), &f("pos"))?;
             check_finite(spec.com.as_slice(), &f("com"))?;
@@ -269,7 +292,10 @@ impl ModelBuilder {
                 mass: spec.mass,
                 inertia: spec.inertia,
                 com: spec.com,
-                ref_pose: Pose { pos: spec.pos + quat::rotation(&q) * spec.com, quat: q },
+                ref_pose: Pose {
+                    pos: spec.pos + quat::rotation(&q) * spec.com,
+                    quat: q,
+                },
             });
         }
         Ok(out)
@@ -279,32 +305,60 @@ impl ModelBuilder {
         let mut out: Vec<Actuator> = Vec::new();
         for spec in &self.actuators {
             let f = |field: &str| format!("actuator[{}].{field}", spec.name);
-            ensure!(!out.iter().any(|a| a.name == spec.name), Error::model(f("name"), &spec.name, "duplicate actuator name"));
+            ensure!(
+                !out.iter().any(|a| a.name == spec.name),
+                Error::model(f("name"), &spec.name, "duplicate actuator name")
+            );
             let joint = joints
                 .iter()
                 .position(|j| j.name == spec.joint)
                 .ok_or_else(|| Error::model(f("joint"), &spec.joint, "unknown joint"))?;
             let nfree = joints[joint].nfree();
-            ensure!(spec.dof < nfree, Error::model(f("dof"), spec.dof, format!("joint has {nfree} free dofs")));
-            ensure!(spec.gear.is_finite(), Error::model(f("gear"), spec.gear, "must be finite"));
+            ensure!(
+                spec.dof < nfree,
+                Error::model(f("dof"), spec.dof, format!("joint has {nfree} free dofs"))
+            );
+            ensure!(
+                spec.gear.is_finite(),
+                Error::model(f("gear"), spec.gear, "must be finite")
+            );
             if let Some((lo, hi)) = spec.ctrlrange {
-                ensure!(lo.is_finite() && hi.is_finite() && lo < hi, Error::model(f("ctrlrange"), (lo, hi), "need finite lower < upper"));
+                ensure!(
+                    lo.is_finite() && hi.is_finite() && lo < hi,
+                    Error::model(f("ctrlrange"), (lo, hi), "need finite lower < upper")
+                );
             }
-            out.push(Actuator { name: spec.name.clone(), joint, dof: spec.dof, gear: spec.gear, ctrlrange: spec.ctrlrange });
+            out.push(Actuator {
+                name: spec.name.clone(),
+                joint,
+                dof: spec.dof,
+                gear: spec.gear,
+                ctrlrange: spec.ctrlrange,
+            });
         }
         Ok(out)
     }
 }
 
 fn check_finite(v: &[f64], field: &str) -> Result<()> {
-    ensure!(v.iter().all(|x| x.is_finite()), Error::model(field, v, "must be finite"));
+    ensure!(
+        v.iter().all(|x| x.is_finite()),
+        Error::model(field, v, "must be finite")
+    );
     Ok(())
 }
 
 fn check_unit_quat(q: &[f64; 4], field: &str) -> Result<()> {
     check_finite(q, field)?;
     let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-    ensure!((n - 1.0).abs() <= 1e-6, Error::model(field, q, format!("quaternion must have unit norm (norm {n})")));
+    ensure!(
+        (n - 1.0).abs() <= 1e-6,
+        Error::model(
+            field,
+            q,
+            format!("quaternion must have unit norm (norm {n})")
+        )
+    );
     Ok(())
 }
 
@@ -312,40 +366,90 @@ fn check_inertia(m: &Matrix3<f64>, field: &str) -> Result<()> {
     let rows: Vec<[f64; 3]> = (0..3).map(|i| [m[(i, 0)], m[(i, 1)], m[(i, 2)]]).collect();
     check_finite(m.as_slice(), field)?;
     let scale = m.abs().max().max(1e-300);
-    ensure!((m - m.transpose()).abs().max() <= 1e-9 * scale, Error::model(field, &rows, "inertia must be symmetric"));
+    ensure!(
+        (m - m.transpose()).abs().max() <= 1e-9 * scale,
+        Error::model(field, &rows, "inertia must be symmetric")
+    );
     let eig = m.symmetric_eigenvalues();
-    ensure!(eig.iter().all(|&e| e > 0.0), Error::model(field, &rows, format!("inertia must be positive definite (eigenvalues {:?})", eig.as_slice())));
+    ensure!(
+        eig.iter().all(|&e| e > 0.0),
+        Error::model(
+            field,
+            &rows,
+            format!(
+                "inertia must be positive definite (eigenvalues {:?})",
+                eig.as_slice()
+            )
+        )
+    );
     let (a, b, c) = (eig[0], eig[1], eig[2]);
     let tol = 1e-9 * (a + b + c);
     ensure!(
         a + b + tol >= c && a + c + tol >= b && b + c + tol >= a,
-        Error::model(field, &rows, format!("principal moments {:?} violate the triangle inequality A + B >= C", eig.as_slice()))
+        Error::model(
+            field,
+            &rows,
+            format!(
+                "principal moments {:?} violate the triangle inequality A + B >= C",
+                eig.as_slice()
+            )
+        )
     );
     Ok(())
 }
 
 fn broadcast(v: &[f64], n: usize, field: &str) -> Result<Vec<f64>> {
     check_finite(v, field)?;
-    ensure!(v.iter().all(|&x| x >= 0.0), Error::model(field, v, "must be >= 0"));
+    ensure!(
+        v.iter().all(|&x| x >= 0.0),
+        Error::model(field, v, "must be >= 0")
+    );
     match v.len() {
         1 => Ok(vec![v[0]; n]),
         len if len == n => Ok(v.to_vec()),
-        _ => Err(Error::model(field, v, format!("need 1 or {n} values (one per free dof)"))),
+        _ => Err(Error::model(
+            field,
+            v,
+            format!("need 1 or {n} values (one per free dof)"),
+        )),
     }
 }
 
 fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Joint> {
     let f = |field: &str| format!("joint[{}].{field}", spec.name);
-    ensure!(!spec.name.is_empty(), Error::model("joint.name", "", "must not be empty"));
+    ensure!(
+        !spec.name.is_empty(),
+        Error::model("joint.name", "", "must not be empty")
+    );
     let find = |name: &str, field: &str| {
-        names.iter().position(|n| *n == name).ok_or_else(|| Error::model(f(field), name, "unknown body"))
+        names
+            .iter()
+            .position(|n| *n == name)
+            .ok_or_else(|| Error::model(f(field), name, "unknown body"))
     };
     let (parent, child) = (find(&spec.parent, "parent")?, find(&spec.child, "child")?);
-    ensure!(parent != child, Error::model(f("child"), &spec.child, "parent and child must differ"));
-    ensure!(child != 0 || spec.is_loop, Error::model(f("child"), &spec.child, "the world can be a child only of a loop joint"));
+    ensure!(
+        parent != child,
+        Error::model(f("child"), &spec.child, "parent and child must differ")
+    );
+    ensure!(
+        child != 0 || spec.is_loop,
+        Error::model(
+            f("child"),
+            &spec.child,
+            "the world can be a child only of a loop joint"
+        )
+    );
     check_finite(spec.axis.as_slice(), &f("axis"))?;
     let norm = spec.axis.norm();
-    ensure!(norm > 1e-9, Error::model(f("axis"), spec.axis.as_slice(), "axis must have non-zero length"));
+    ensure!(
+        norm > 1e-9,
+        Error::model(
+            f("axis"),
+            spec.axis.as_slice(),
+            "axis must have non-zero length"
+        )
+    );
     check_finite(spec.parent_anchor.as_slice(), &f("parent_anchor"))?;
     check_finite(spec.child_anchor.as_slice(), &f("child_anchor"))?;
     if spec.range.is_some() {
@@ -361,8 +465,16 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
     let floating = spec.kind == JointKind::Floating;
     // Floating joints (MuJoCo's free joint) measure the child body frame's pose in the parent
     // body frame: no orientation offset, anchors at the body frame origins.
-    let (pa, ca) = if floating { (Vector3::zeros(), Vector3::zeros()) } else { (spec.parent_anchor, spec.child_anchor) };
-    let offset = if floating { quat::identity() } else { quat::conj(&pb.ref_pose.quat) * cb.ref_pose.quat };
+    let (pa, ca) = if floating {
+        (Vector3::zeros(), Vector3::zeros())
+    } else {
+        (spec.parent_anchor, spec.child_anchor)
+    };
+    let offset = if floating {
+        quat::identity()
+    } else {
+        quat::conj(&pb.ref_pose.quat) * cb.ref_pose.quat
+    };
     let nfree = spec.kind.ntrans() + spec.kind.nrot();
     let mut joint = Joint {
         name: spec.name.clone(),
@@ -384,12 +496,22 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
     };
     if let Some(r) = &spec.spring_ref {
         check_finite(r, &f("spring_ref"))?;
-        ensure!(r.len() == joint.nq(), Error::model(f("spring_ref"), r, format!("need {} values (qpos of the joint)", joint.nq())));
+        ensure!(
+            r.len() == joint.nq(),
+            Error::model(
+                f("spring_ref"),
+                r,
+                format!("need {} values (qpos of the joint)", joint.nq())
+            )
+        );
         let mut r = r.clone();
         if matches!(joint.rot, RotDofs::Ball) {
             let q = &mut r[joint.ntrans..];
             let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-            ensure!(n > 1e-9, Error::model(f("spring_ref"), &r, "rest quaternion must be non-zero"));
+            ensure!(
+                n > 1e-9,
+                Error::model(f("spring_ref"), &r, "rest quaternion must be non-zero")
+            );
             q.iter_mut().for_each(|x| *x /= n);
         }
         joint.spring_ref = r;
@@ -403,14 +525,20 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         Error::model(
             f("anchors"),
             (spec.parent_anchor.as_slice(), spec.child_anchor.as_slice()),
-            format!("constraint violated by {gap:.3e} at the reference pose: anchors or body poses disagree")
+            format!(
+                "constraint violated by {gap:.3e} at the reference pose: anchors or body poses disagree"
+            )
         )
     );
     Ok(joint)
 }
 
 fn joint_frame_at_reference(joint: &Joint, bodies: &[Body]) -> JointFrame {
-    JointFrame::new(joint, &bodies[joint.parent].ref_pose, &bodies[joint.child].ref_pose)
+    JointFrame::new(
+        joint,
+        &bodies[joint.parent].ref_pose,
+        &bodies[joint.child].ref_pose,
+    )
 }
 
 /// Each moving body must be the child of exactly one tree joint, and following parent joints
@@ -422,7 +550,10 @@ fn spanning_tree(bodies: &[Body], joints: &[Joint]) -> Result<Vec<Option<usize>>
             return Err(Error::model(
                 format!("joint[{}].child", joint.name),
                 &bodies[joint.child].name,
-                format!("body is already the child of joint '{}'; declare one of them as a loop joint", joints[other].name),
+                format!(
+                    "body is already the child of joint '{}'; declare one of them as a loop joint",
+                    joints[other].name
+                ),
             ));
         }
         parent_joint[joint.child] = Some(j);
@@ -447,7 +578,11 @@ fn spanning_tree(bodies: &[Body], joints: &[Joint]) -> Result<Vec<Option<usize>>
             steps += 1;
             ensure!(
                 steps <= bodies.len(),
-                Error::model("joints", &path[path.len().saturating_sub(bodies.len())..], "these joints form a cycle that is not declared as a loop (set loop=True on one)")
+                Error::model(
+                    "joints",
+                    &path[path.len().saturating_sub(bodies.len())..],
+                    "these joints form a cycle that is not declared as a loop (set loop=True on one)"
+                )
             );
         }
     }

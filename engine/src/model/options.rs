@@ -45,11 +45,21 @@ impl Options {
             self.gravity.iter().all(|g| g.is_finite()),
             Error::model("gravity", self.gravity.as_slice(), "must be finite")
         );
-        ensure!(self.rtol.is_finite() && self.rtol > 0.0, Error::model("rtol", self.rtol, "must be finite and > 0"));
-        ensure!(self.max_iter >= 1, Error::model("max_iter", self.max_iter, "must be >= 1"));
+        ensure!(
+            self.rtol.is_finite() && self.rtol > 0.0,
+            Error::model("rtol", self.rtol, "must be finite and > 0")
+        );
+        ensure!(
+            self.max_iter >= 1,
+            Error::model("max_iter", self.max_iter, "must be >= 1")
+        );
         ensure!(
             self.regularization.is_finite() && self.regularization >= 0.0,
-            Error::model("regularization", self.regularization, "must be finite and >= 0")
+            Error::model(
+                "regularization",
+                self.regularization,
+                "must be finite and >= 0"
+            )
         );
         Ok(())
     }

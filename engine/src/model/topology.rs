@@ -50,7 +50,11 @@ pub(crate) fn body_node(b: usize) -> Option<usize> {
 
 impl Topology {
     /// Build the graph; `parent_joint[b]` is the tree joint whose child is `b` (`None` for world).
-    pub fn new(nbody: usize, joints: &[Joint], parent_joint: &[Option<usize>]) -> Result<Self, String> {
+    pub fn new(
+        nbody: usize,
+        joints: &[Joint],
+        parent_joint: &[Option<usize>],
+    ) -> Result<Self, String> {
         let nmoving = nbody - 1;
         let mut dims = vec![6; nmoving];
         let mut joint_node = vec![None; joints.len()];
@@ -77,7 +81,9 @@ impl Topology {
         }
         let order = elimination_order(nmoving, joints, parent_joint, &joint_node, dims.len());
         let pattern = BlockPattern::new(&dims, &edges, &order)?;
-        let blk = |i: usize, j: usize| -> Option<(usize, usize)> { Some((pattern.block(i, j)?, pattern.block(j, i)?)) };
+        let blk = |i: usize, j: usize| -> Option<(usize, usize)> {
+            Some((pattern.block(i, j)?, pattern.block(j, i)?))
+        };
         let blocks = joints
             .iter()
             .enumerate()
@@ -87,12 +93,21 @@ impl Topology {
                 JointBlocks {
                     jp: jn.zip(p).and_then(|(jn, p)| blk(jn, p)),
                     jc: jn.zip(c).and_then(|(jn, c)| blk(jn, c)),
-                    pc: if joint.has_damper() { p.zip(c).and_then(|(p, c)| blk(p, c)) } else { None },
+                    pc: if joint.has_damper() {
+                        p.zip(c).and_then(|(p, c)| blk(p, c))
+                    } else {
+                        None
+                    },
                 }
             })
             .collect();
-        let body_diag = (0..nbody).map(|b| body_node(b).and_then(|n| pattern.block(n, n)).unwrap_or(0)).collect();
-        let joint_diag = joint_node.iter().map(|n| n.and_then(|n| pattern.block(n, n))).collect();
+        let body_diag = (0..nbody)
+            .map(|b| body_node(b).and_then(|n| pattern.block(n, n)).unwrap_or(0))
+            .collect();
+        let joint_diag = joint_node
+            .iter()
+            .map(|n| n.and_then(|n| pattern.block(n, n)))
+            .collect();
         let fk_order = fk_order(joints, parent_joint);
         Ok(Topology {
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
@@ -112,7 +127,13 @@ impl Topology {
 fn fk_order(joints: &[Joint], parent_joint: &[Option<usize>]) -> Vec<usize> {
     let mut order = Vec::new();
     let mut done = vec![false; joints.len()];
-    fn visit(j: usize, joints: &[Joint], pj: &[Option<usize>], done: &mut [bool], order: &mut Vec<usize>) {
+    fn visit(
+        j: usize,
+        joints: &[Joint],
+        pj: &[Option<usize>],
+        done: &mut [bool],
+        order: &mut Vec<usize>,
+    ) {
         if done[j] {
             return;
         }

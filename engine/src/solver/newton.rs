@@ -40,7 +40,10 @@ fn w_body(model: &Model, w: &[f64], b: usize) -> (Vector3<f64>, Vector3<f64>) {
         return (Vector3::zeros(), Vector3::zeros());
     }
     let o = body_slot(model, b);
-    (Vector3::new(w[o], w[o + 1], w[o + 2]), Vector3::new(w[o + 3], w[o + 4], w[o + 5]))
+    (
+        Vector3::new(w[o], w[o + 1], w[o + 2]),
+        Vector3::new(w[o + 3], w[o + 4], w[o + 5]),
+    )
 }
 
 fn pose(state: &State, b: usize) -> Pose {
@@ -48,7 +51,13 @@ fn pose(state: &State, b: usize) -> Pose {
 }
 
 /// Evaluate applied impulses and current-configuration Jacobians; set the initial iterate.
-pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace, ctrl: &[f64], forces: &AppliedForces) {
+pub(crate) fn prepare(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+) {
     let h = model.options.timestep;
     let g = model.options.gravity;
     for (b, body) in model.bodies.iter().enumerate() {
@@ -56,7 +65,10 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace, ctrl: &[
         if b > 0 {
             let rot = quat::rotation(&state.pose(b).quat);
             let (f, tau) = match forces.xfrc {
-                Some(x) => (Vector3::new(x[6 * b], x[6 * b + 1], x[6 * b + 2]), Vector3::new(x[6 * b + 3], x[6 * b + 4], x[6 * b + 5])),
+                Some(x) => (
+                    Vector3::new(x[6 * b], x[6 * b + 1], x[6 * b + 2]),
+                    Vector3::new(x[6 * b + 3], x[6 * b + 4], x[6 * b + 5]),
+                ),
                 None => (Vector3::zeros(), Vector3::zeros()),
             };
             let lin = (g * body.mass + f) * h;
@@ -89,20 +101,33 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace, ctrl: &[
     for (ji, joint) in model.joints.iter().enumerate() {
         if let Some(n) = model.topology.joint_node[ji] {
             let (o, adr) = (model.topology.pattern.offset(n), model.topology.con_adr[ji]);
-            ws.w[o..o + joint.ncon()].copy_from_slice(&state.joint_impulse[adr..adr + joint.ncon()]);
+            ws.w[o..o + joint.ncon()]
+                .copy_from_slice(&state.joint_impulse[adr..adr + joint.ncon()]);
         }
     }
 }
 
 /// Spring + actuator + applied generalized force on the free dofs of joint `ji`.
-fn generalized_force(model: &Model, ji: usize, frame: &JointFrame, ctrl: &[f64], forces: &AppliedForces, tau: &mut [f64]) {
+fn generalized_force(
+    model: &Model,
+    ji: usize,
+    frame: &JointFrame,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+    tau: &mut [f64],
+) {
     let joint = &model.joints[ji];
     if joint.has_spring() {
         let mut coords = [0.0; 7];
         frame.coordinates(joint, &mut coords[..joint.nq()]);
         frame.spring_force(joint, &coords[..joint.nq()], tau);
     }
-    for (a, act) in model.actuators.iter().enumerate().filter(|(_, a)| a.joint == ji) {
+    for (a, act) in model
+        .actuators
+        .iter()
+        .enumerate()
+        .filter(|(_, a)| a.joint == ji)
+    {
         let u = match act.ctrlrange {
             Some((lo, hi)) => ctrl[a].clamp(lo, hi),
             None => ctrl[a],
@@ -134,14 +159,28 @@ fn add_jt_times(applied: &mut [[f64; 6]], joint: &Joint, jac: &[f64], tau: &[f64
 /// Residual at the iterate `w`; also sets `ws.next_pose`. Returns its ∞-norm.
 pub(crate) fn evaluate(model: &Model, state: &State, ws: &mut Workspace, use_trial: bool) -> f64 {
     let h = model.options.timestep;
-    let Workspace { w, w_trial, residual, next_pose, applied, jac_now, free_jac, free_adr, .. } = ws;
+    let Workspace {
+        w,
+        w_trial,
+        residual,
+        next_pose,
+        applied,
+        jac_now,
+        free_jac,
+        free_adr,
+        ..
+    } = ws;
     let w: &[f64] = if use_trial { w_trial } else { w };
     for (b, body) in model.bodies.iter().enumerate().skip(1) {
         let (v, om) = w_body(model, w, b);
         let now = state.pose(b);
-        next_pose[b] = Pose { pos: now.pos + v * h, quat: now.quat * quat::step_map(&om, h) };
+        next_pose[b] = Pose {
+            pos: now.pos + v * h,
+            quat: now.quat * quat::step_map(&om, h),
+        };
         let prev = state.velocity(b);
-        let (lin, rot) = momentum_residual(body.mass, &body.inertia, h, (&prev.0, &prev.1), (&v, &om));
+        let (lin, rot) =
+            momentum_residual(body.mass, &body.inertia, h, (&prev.0, &prev.1), (&v, &om));
         let o = body_slot(model, b);
         for i in 0..3 {
             residual[o + i] = lin[i] - applied[b][i];
@@ -165,21 +204,46 @@ pub(crate) fn evaluate(model: &Model, state: &State, ws: &mut Workspace, use_tri
                     }
                 }
             }
-            let np = if joint.parent == 0 { Pose::world() } else { next_pose[joint.parent] };
-            let nc = if joint.child == 0 { Pose::world() } else { next_pose[joint.child] };
+            let np = if joint.parent == 0 {
+                Pose::world()
+            } else {
+                next_pose[joint.parent]
+            };
+            let nc = if joint.child == 0 {
+                Pose::world()
+            } else {
+                next_pose[joint.child]
+            };
             JointFrame::new(joint, &np, &nc).constraint(joint, &mut residual[o..o + ncon]);
         }
         if joint.has_damper() {
             add_damper_residual(model, joint, &free_jac[free_adr[ji]..], w, residual, h);
         }
     }
-    residual.iter().fold(0.0f64, |m, r| if r.is_nan() { f64::NAN } else { m.max(r.abs()) })
+    let n = residual.iter().fold(
+        0.0f64,
+        |m, r| if r.is_nan() { f64::NAN } else { m.max(r.abs()) },
+    );
+    n
 }
 
 /// `r_b += h J_bᵀ D (J_f w⁺)`: implicit damper impulses on both bodies.
-fn add_damper_residual(model: &Model, joint: &Joint, jf: &[f64], w: &[f64], residual: &mut [f64], h: f64) {
-    let (wp, wc) = (w_body(model, w, joint.parent), w_body(model, w, joint.child));
-    let x = [wp.0[0], wp.0[1], wp.0[2], wp.1[0], wp.1[1], wp.1[2], wc.0[0], wc.0[1], wc.0[2], wc.1[0], wc.1[1], wc.1[2]];
+fn add_damper_residual(
+    model: &Model,
+    joint: &Joint,
+    jf: &[f64],
+    w: &[f64],
+    residual: &mut [f64],
+    h: f64,
+) {
+    let (wp, wc) = (
+        w_body(model, w, joint.parent),
+        w_body(model, w, joint.child),
+    );
+    let x = [
+        wp.0[0], wp.0[1], wp.0[2], wp.1[0], wp.1[1], wp.1[2], wc.0[0], wc.0[1], wc.0[2], wc.1[0],
+        wc.1[1], wc.1[2],
+    ];
     for r in 0..joint.nfree() {
         let row = &jf[12 * r..12 * r + 12];
         let rate: f64 = row.iter().zip(x.iter()).map(|(a, b)| a * b).sum();
@@ -222,14 +286,25 @@ fn assemble_joint(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h
     let ncon = joint.ncon();
     if let Some(dj) = t.joint_diag[ji] {
         let adr = t.con_adr[ji];
-        let np = if joint.parent == 0 { Pose::world() } else { ws.next_pose[joint.parent] };
-        let nc = if joint.child == 0 { Pose::world() } else { ws.next_pose[joint.child] };
+        let np = if joint.parent == 0 {
+            Pose::world()
+        } else {
+            ws.next_pose[joint.parent]
+        };
+        let nc = if joint.child == 0 {
+            Pose::world()
+        } else {
+            ws.next_pose[joint.child]
+        };
         let jn = &mut ws.jac_next[12 * adr..12 * (adr + ncon)];
         JointFrame::new(joint, &np, &nc).constraint_jacobian(joint, jn);
         for r in 0..ncon {
             ws.matrix.values[dj + r * ncon + r] = -model.options.regularization;
         }
-        for (side, b, blk) in [(0, joint.parent, &t.blocks[ji].jp), (1, joint.child, &t.blocks[ji].jc)] {
+        for (side, b, blk) in [
+            (0, joint.parent, &t.blocks[ji].jp),
+            (1, joint.child, &t.blocks[ji].jc),
+        ] {
             let Some((row_j, row_b)) = *blk else { continue };
             let dphi: Matrix3<f64> = ws.dphi[b];
             for r in 0..ncon {
@@ -267,7 +342,13 @@ fn add_damper_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint
                 t.body_diag[a]
             } else {
                 match t.blocks[ji].pc {
-                    Some((pc, cp)) => if sa == 0 { pc } else { cp },
+                    Some((pc, cp)) => {
+                        if sa == 0 {
+                            pc
+                        } else {
+                            cp
+                        }
+                    }
                     None => continue,
                 }
             };
@@ -302,7 +383,12 @@ fn spin_limited_step(model: &Model, ws: &Workspace) -> f64 {
 pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
     let opts = &model.options;
     let mut norm = evaluate(model, state, ws, false);
-    let mut report = StepReport { status: SolveStatus::MaxIterations, iterations: 0, residual: norm, complementarity: 0.0 };
+    let mut report = StepReport {
+        status: SolveStatus::MaxIterations,
+        iterations: 0,
+        residual: norm,
+        complementarity: 0.0,
+    };
     for it in 0..opts.max_iter {
         if !norm.is_finite() {
             report.status = SolveStatus::NonFinite;
@@ -354,15 +440,122 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
 pub(crate) fn write_state(model: &Model, state: &mut State, ws: &Workspace) {
     for b in 1..model.nbody() {
         let p = ws.next_pose[b];
-        state.set_pose(b, &Pose { pos: p.pos, quat: p.quat.normalize() });
+        state.set_pose(
+            b,
+            &Pose {
+                pos: p.pos,
+                quat: p.quat.normalize(),
+            },
+        );
         let (v, w) = w_body(model, &ws.w, b);
         state.set_velocity(b, &v, &w);
     }
     for (ji, joint) in model.joints.iter().enumerate() {
         if let Some(n) = model.topology.joint_node[ji] {
             let (o, adr) = (model.topology.pattern.offset(n), model.topology.con_adr[ji]);
-            state.joint_impulse[adr..adr + joint.ncon()].copy_from_slice(&ws.w[o..o + joint.ncon()]);
+            state.joint_impulse[adr..adr + joint.ncon()]
+                .copy_from_slice(&ws.w[o..o + joint.ncon()]);
         }
     }
     state.time += model.options.timestep;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{BodySpec, JointKind, JointSpec, ModelBuilder};
+
+    /// A model exercising every Jacobian block: chain of revolute, universal, ball, prismatic and
+    /// a damped cylindrical joint, with a non-trivial state.
+    fn model() -> Model {
+        let mut b = ModelBuilder::new().timestep(0.02);
+        let kinds = [
+            JointKind::Revolute,
+            JointKind::Orbital,
+            JointKind::Spherical,
+            JointKind::Prismatic,
+            JointKind::Cylindrical,
+            JointKind::Fixed,
+        ];
+        let q = quat::from_wxyz(&[0.9, 0.1, -0.3, 0.2]).normalize();
+        let rot = quat::rotation(&q);
+        let mut prev = Vector3::zeros();
+        for (i, kind) in kinds.iter().enumerate() {
+            let name = format!("b{i}");
+            let pos = Vector3::new(0.3 * i as f64, 0.1, -(i as f64) - 0.4);
+            b = b.body(
+                BodySpec::new(&name, 1.0 + i as f64, [0.1, 0.2, 0.25])
+                    .pos(pos.into())
+                    .quat(quat::wxyz(&q).into()),
+            );
+            let parent = if i == 0 {
+                "world".to_string()
+            } else {
+                format!("b{}", i - 1)
+            };
+            let pa = if i == 0 {
+                Vector3::new(0.0, 0.1, 0.5)
+            } else {
+                Vector3::new(0.15, 0.0, -0.5)
+            };
+            let world_anchor = if i == 0 { pa } else { prev + rot * pa };
+            let ca = rot.transpose() * (world_anchor - pos);
+            let mut j = JointSpec::new(&format!("j{i}"), *kind, &parent, &name)
+                .axis([0.2, 1.0, 0.3])
+                .anchors(pa.into(), ca.into());
+            if *kind == JointKind::Cylindrical {
+                j = j.damping(0.7);
+            }
+            b = b.joint(j);
+            prev = pos;
+        }
+        b.compile().unwrap()
+    }
+
+    #[test]
+    fn newton_matrix_matches_finite_differences_of_the_residual() {
+        let model = model();
+        let mut state = crate::State::reference(&model);
+        let qpos = model.qpos0.clone();
+        let qvel: Vec<f64> = (0..model.nv)
+            .map(|i| (i as f64 * 0.7).sin() * 3.0)
+            .collect();
+        crate::set_minimal(&model, &mut state, &qpos, &qvel).unwrap();
+        let mut ws = Workspace::new(&model);
+        prepare(&model, &state, &mut ws, &[], &AppliedForces::default());
+        // move the iterate away from the state so every block is generic
+        for (i, w) in ws.w.iter_mut().enumerate() {
+            *w += 0.3 * ((i as f64) * 1.3).cos();
+        }
+        let n = ws.w.len();
+        evaluate(&model, &state, &mut ws, false);
+        assemble(&model, &mut ws);
+        let base = ws.w.clone();
+        let eps = 1e-6;
+        for col in 0..n {
+            let mut x = vec![0.0; n];
+            x[col] = 1.0;
+            let mut ax = vec![0.0; n];
+            ws.matrix.matvec(&model.topology.pattern, &x, &mut ax);
+            ws.w_trial.copy_from_slice(&base);
+            ws.w_trial[col] += eps;
+            evaluate(&model, &state, &mut ws, true);
+            let rp = ws.residual.clone();
+            ws.w_trial[col] -= 2.0 * eps;
+            evaluate(&model, &state, &mut ws, true);
+            for row in 0..n {
+                let fd = (rp[row] - ws.residual[row]) / (2.0 * eps);
+                let reg = if row == col && row >= 6 * (model.nbody() - 1) {
+                    -model.options.regularization
+                } else {
+                    0.0
+                };
+                assert!(
+                    (fd - (ax[row] - reg)).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "row {row} col {col}: fd {fd} vs {}",
+                    ax[row]
+                );
+            }
+        }
+    }
 }

@@ -1,14 +1,20 @@
 //! Small mechanisms shared by the scenario tests.
 #![allow(dead_code)]
 use ukemi_engine::joints::geometry::{JointFrame, Pose};
-use ukemi_engine::{BodySpec, JointKind, JointSpec, Model, ModelBuilder, State, Workspace, mechanics, step};
+use ukemi_engine::{
+    BodySpec, JointKind, JointSpec, Model, ModelBuilder, State, Workspace, mechanics, step,
+};
 
 /// A point-like bob of mass 1 on a massless rod of length `len`, hinge about y at the origin.
 pub fn pendulum(len: f64, h: f64) -> Model {
     ModelBuilder::new()
         .timestep(h)
         .body(BodySpec::new("bob", 1.0, [1e-6, 1e-6, 1e-6]).pos([0.0, 0.0, -len]))
-        .joint(JointSpec::new("hinge", JointKind::Revolute, "world", "bob").axis([0.0, 1.0, 0.0]).anchors([0.0; 3], [0.0, 0.0, len]))
+        .joint(
+            JointSpec::new("hinge", JointKind::Revolute, "world", "bob")
+                .axis([0.0, 1.0, 0.0])
+                .anchors([0.0; 3], [0.0, 0.0, len]),
+        )
         .compile()
         .unwrap()
 }
@@ -20,9 +26,17 @@ pub fn chain(n: usize, h: f64) -> Model {
     for i in 0..n {
         let name = format!("link{i}");
         b = b.body(BodySpec::new(&name, 1.0, [rod, rod, 1e-3]).pos([0.0, 0.0, -(i as f64) - 0.5]));
-        let parent = if i == 0 { "world".to_string() } else { format!("link{}", i - 1) };
+        let parent = if i == 0 {
+            "world".to_string()
+        } else {
+            format!("link{}", i - 1)
+        };
         let pa = if i == 0 { [0.0; 3] } else { [0.0, 0.0, -0.5] };
-        b = b.joint(JointSpec::new(&format!("j{i}"), JointKind::Revolute, &parent, &name).axis([0.0, 1.0, 0.0]).anchors(pa, [0.0, 0.0, 0.5]));
+        b = b.joint(
+            JointSpec::new(&format!("j{i}"), JointKind::Revolute, &parent, &name)
+                .axis([0.0, 1.0, 0.0])
+                .anchors(pa, [0.0, 0.0, 0.5]),
+        );
     }
     b.compile().unwrap()
 }
@@ -41,13 +55,18 @@ pub fn constraint_violation(model: &Model, state: &State) -> f64 {
 
 /// Total mechanical energy (kinetic of the midpoint velocities + gravity).
 pub fn energy(model: &Model, state: &State) -> f64 {
-    mechanics::kinetic_energy(model, state) + mechanics::potential_energy(model, state)
+    mechanics::total_energy(model, state)
 }
 
 /// Step once and insist on convergence.
 pub fn step_ok(model: &Model, state: &mut State, ws: &mut Workspace, ctrl: &[f64]) {
     let r = step(model, state, ws, ctrl).unwrap();
-    assert_eq!(r.status, ukemi_engine::SolveStatus::Converged, "step at t = {}: {r:?}", state.time);
+    assert_eq!(
+        r.status,
+        ukemi_engine::SolveStatus::Converged,
+        "step at t = {}: {r:?}",
+        state.time
+    );
 }
 
 /// Times at which `x` crosses zero upwards, linearly interpolated.

@@ -1,0 +1,40 @@
+//! Steady-state stepping allocates nothing: a counting global allocator around `step`.
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+mod common;
+use ukemi_engine::{State, Workspace, set_minimal, step};
+
+struct Counting;
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn stepping_a_chain_allocates_nothing() {
+    let model = common::chain(20, 0.01);
+    let mut state = State::reference(&model);
+    set_minimal(&model, &mut state, &vec![0.3; 20], &vec![0.0; 20]).unwrap();
+    let mut ws = Workspace::new(&model);
+    step(&model, &mut state, &mut ws, &[]).unwrap();
+    let before = ALLOCS.load(Ordering::Relaxed);
+    for _ in 0..100 {
+        step(&model, &mut state, &mut ws, &[]).unwrap();
+    }
+    assert_eq!(
+        ALLOCS.load(Ordering::Relaxed) - before,
+        0,
+        "allocations during 100 steps"
+    );
+}
