@@ -1,9 +1,9 @@
 //! The engine's one error type. Every message names the field and the bad value.
 
 /// Errors raised by the engine. Solver non-convergence is *not* an error: it is reported in
-/// [`crate::StepReport::status`].
+/// [`crate::StepReport::status`]. Deliberately not `#[non_exhaustive]`: the bindings map every
+/// variant to a Python class in one exhaustive `match`, so a new variant fails to compile there.
 #[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
 pub enum Error {
     /// A model field has an invalid value (found when compiling).
     #[error("invalid model: `{field}` = {value}: {reason}")]
@@ -88,7 +88,8 @@ impl Error {
 #[macro_export]
 macro_rules! ensure {
     ($cond:expr, $err:expr) => {
-        if !$cond {
+        if $cond {
+        } else {
             return Err($err);
         }
     };

@@ -25,7 +25,7 @@ static GLOBAL: Counting = Counting;
 fn stepping_a_chain_allocates_nothing() {
     let model = common::chain(20, 0.01);
     let mut state = State::reference(&model);
-    set_minimal(&model, &mut state, &vec![0.3; 20], &vec![0.0; 20]).unwrap();
+    set_minimal(&model, &mut state, &[0.3; 20], &[0.0; 20]).unwrap();
     let mut ws = Workspace::new(&model);
     step(&model, &mut state, &mut ws, &[]).unwrap();
     let before = ALLOCS.load(Ordering::Relaxed);

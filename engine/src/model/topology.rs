@@ -178,11 +178,11 @@ fn elimination_order(
     }
     let mut children: Vec<Vec<usize>> = vec![Vec::new(); nnodes];
     let mut roots = Vec::new();
-    for n in 0..nnodes {
+    for (n, parent) in up.iter().enumerate() {
         if loops.contains(&n) {
             continue;
         }
-        match up[n] {
+        match *parent {
             Some(p) => children[p].push(n),
             None => roots.push(n),
         }

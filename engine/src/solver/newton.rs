@@ -220,11 +220,18 @@ pub(crate) fn evaluate(model: &Model, state: &State, ws: &mut Workspace, use_tri
             add_damper_residual(model, joint, &free_jac[free_adr[ji]..], w, residual, h);
         }
     }
-    let n = residual.iter().fold(
-        0.0f64,
-        |m, r| if r.is_nan() { f64::NAN } else { m.max(r.abs()) },
-    );
-    n
+    inf_norm(residual)
+}
+
+/// ∞-norm that propagates NaN (`f64::max` alone would drop it).
+fn inf_norm(x: &[f64]) -> f64 {
+    x.iter().fold(0.0f64, |m, r| {
+        if m.is_nan() || r.is_nan() {
+            f64::NAN
+        } else {
+            m.max(r.abs())
+        }
+    })
 }
 
 /// `r_b += h J_bᵀ D (J_f w⁺)`: implicit damper impulses on both bodies.

@@ -1,0 +1,286 @@
+//! `ModelBuilder` and `Model` classes: thin wrappers over the engine's builder and compiled model.
+use std::sync::Arc;
+
+use nalgebra::{Matrix3, Vector3};
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
+use pyo3::prelude::*;
+use ukemi_engine::{ActuatorSpec, BodySpec, JointKind, JointSpec, Model, ModelBuilder, State};
+
+use crate::errors::{IntoPy, ModelError, guard};
+use crate::state::PyState;
+
+/// Builds a model; the Python `ukemi.ModelBuilder` converts arguments and calls these methods.
+#[pyclass(name = "_ModelBuilder", module = "ukemi._ukemi")]
+pub struct PyModelBuilder {
+    inner: ModelBuilder,
+}
+
+#[pymethods]
+impl PyModelBuilder {
+    #[new]
+    fn new(timestep: f64, gravity: [f64; 3]) -> Self {
+        PyModelBuilder {
+            inner: ModelBuilder::new().timestep(timestep).gravity(gravity),
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn add_body(
+        &mut self,
+        name: String,
+        mass: f64,
+        inertia: [f64; 9],
+        pos: [f64; 3],
+        quat: [f64; 4],
+        com: [f64; 3],
+    ) {
+        let spec = BodySpec::new(&name, mass, [1.0; 3])
+            .inertia_matrix(Matrix3::from_row_slice(&inertia))
+            .pos(pos)
+            .quat(quat)
+            .com(com);
+        self.inner.add_body(spec);
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn add_joint(
+        &mut self,
+        name: String,
+        kind: &str,
+        parent: String,
+        child: String,
+        axis: [f64; 3],
+        parent_anchor: [f64; 3],
+        child_anchor: [f64; 3],
+        stiffness: Vec<f64>,
+        damping: Vec<f64>,
+        spring_ref: Option<Vec<f64>>,
+        range: Option<Vec<(f64, f64)>>,
+        is_loop: bool,
+    ) -> PyResult<()> {
+        let kind = JointKind::from_name(kind).ok_or_else(|| {
+            let names: Vec<&str> = JointKind::ALL.iter().map(|k| k.name()).collect();
+            ModelError::new_err(format!("invalid model: `joint[{name}].kind` = {kind:?}: unknown joint kind; expected one of {names:?}"))
+        })?;
+        let mut spec = JointSpec::new(&name, kind, &parent, &child)
+            .axis(axis)
+            .anchors(parent_anchor, child_anchor);
+        spec.stiffness = stiffness;
+        spec.damping = damping;
+        spec.spring_ref = spring_ref;
+        spec.range = range;
+        spec.is_loop = is_loop;
+        self.inner.add_joint(spec);
+        Ok(())
+    }
+
+    fn add_actuator(
+        &mut self,
+        name: String,
+        joint: String,
+        dof: usize,
+        gear: f64,
+        ctrlrange: Option<(f64, f64)>,
+    ) {
+        self.inner.add_actuator(ActuatorSpec {
+            name,
+            joint,
+            dof,
+            gear,
+            ctrlrange,
+        });
+    }
+
+    fn compile(&self) -> PyResult<PyModel> {
+        guard(|| {
+            Ok(PyModel {
+                inner: Arc::new(self.inner.compile().py()?),
+            })
+        })
+    }
+}
+
+/// A compiled, immutable model.
+#[pyclass(name = "Model", module = "ukemi._ukemi", frozen)]
+pub struct PyModel {
+    pub inner: Arc<Model>,
+}
+
+#[pymethods]
+impl PyModel {
+    /// Number of position coordinates.
+    #[getter]
+    fn nq(&self) -> usize {
+        self.inner.nq
+    }
+    /// Number of velocity coordinates.
+    #[getter]
+    fn nv(&self) -> usize {
+        self.inner.nv
+    }
+    /// Number of actuators.
+    #[getter]
+    fn nu(&self) -> usize {
+        self.inner.nu()
+    }
+    /// Number of bodies including the world.
+    #[getter]
+    fn nbody(&self) -> usize {
+        self.inner.nbody()
+    }
+    /// Number of joints.
+    #[getter]
+    fn njoint(&self) -> usize {
+        self.inner.njoint()
+    }
+    /// Number of collision geometries (contact arrives with issue #3).
+    #[getter]
+    fn ngeom(&self) -> usize {
+        0
+    }
+    /// Number of joint constraint rows (impulse unknowns).
+    #[getter]
+    fn ncon(&self) -> usize {
+        self.inner.ncon()
+    }
+    #[getter]
+    fn body_names(&self) -> Vec<String> {
+        self.inner.bodies.iter().map(|b| b.name.clone()).collect()
+    }
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.inner.joints.iter().map(|j| j.name.clone()).collect()
+    }
+    #[getter]
+    fn joint_kinds(&self) -> Vec<&'static str> {
+        self.inner.joints.iter().map(|j| j.kind.name()).collect()
+    }
+    #[getter]
+    fn actuator_names(&self) -> Vec<String> {
+        self.inner
+            .actuators
+            .iter()
+            .map(|a| a.name.clone())
+            .collect()
+    }
+    #[getter]
+    fn keyframe_names(&self) -> Vec<String> {
+        Vec::new()
+    }
+    #[getter]
+    fn timestep(&self) -> f64 {
+        self.inner.options.timestep
+    }
+    #[getter]
+    fn gravity<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, self.inner.options.gravity.as_slice())
+    }
+    /// Solver options as a dict.
+    #[getter]
+    fn options(&self) -> Vec<(&'static str, f64)> {
+        let o = &self.inner.options;
+        vec![
+            ("timestep", o.timestep),
+            ("rtol", o.rtol),
+            ("max_iter", o.max_iter as f64),
+            ("max_ls", o.max_ls as f64),
+            ("regularization", o.regularization),
+        ]
+    }
+    #[getter]
+    fn body_mass<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.bodies.iter().map(|b| b.mass).collect())
+    }
+    /// Inertia about the COM in the body frame, (nbody, 3, 3).
+    #[getter]
+    fn body_inertia<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray3<f64>>> {
+        let flat: Vec<f64> = self
+            .inner
+            .bodies
+            .iter()
+            .flat_map(|b| b.inertia.transpose().as_slice().to_vec())
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([self.inner.nbody(), 3, 3])
+    }
+    /// COM position in each body frame, (nbody, 3).
+    #[getter]
+    fn body_com<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let flat: Vec<f64> = self
+            .inner
+            .bodies
+            .iter()
+            .flat_map(|b| b.com.as_slice().to_vec())
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([self.inner.nbody(), 3])
+    }
+    #[getter]
+    fn qpos0<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.qpos0)
+    }
+
+    /// A new model with other options (any subset of the keywords).
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, max_iter=None, max_ls=None, regularization=None))]
+    fn with_options(
+        &self,
+        timestep: Option<f64>,
+        gravity: Option<[f64; 3]>,
+        rtol: Option<f64>,
+        max_iter: Option<usize>,
+        max_ls: Option<usize>,
+        regularization: Option<f64>,
+    ) -> PyResult<PyModel> {
+        guard(|| {
+            let mut o = self.inner.options.clone();
+            o.timestep = timestep.unwrap_or(o.timestep);
+            o.gravity = gravity.map(Vector3::from).unwrap_or(o.gravity);
+            o.rtol = rtol.unwrap_or(o.rtol);
+            o.max_iter = max_iter.unwrap_or(o.max_iter);
+            o.max_ls = max_ls.unwrap_or(o.max_ls);
+            o.regularization = regularization.unwrap_or(o.regularization);
+            Ok(PyModel {
+                inner: Arc::new(self.inner.with_options(o).py()?),
+            })
+        })
+    }
+
+    /// State at the reference pose, or at the given minimal coordinates.
+    #[pyo3(signature = (qpos=None, qvel=None, key=None))]
+    fn make_state(
+        &self,
+        qpos: Option<Vec<f64>>,
+        qvel: Option<Vec<f64>>,
+        key: Option<String>,
+    ) -> PyResult<PyState> {
+        guard(|| {
+            if let Some(k) = key {
+                return Err(crate::errors::InputError::new_err(format!(
+                    "invalid input: `key` = {k:?}: unknown keyframe (this model has none)"
+                )));
+            }
+            let m = &self.inner;
+            let mut state = State::reference(m);
+            if qpos.is_some() || qvel.is_some() {
+                let q = qpos.unwrap_or_else(|| m.qpos0.clone());
+                let v = qvel.unwrap_or_else(|| vec![0.0; m.nv]);
+                ukemi_engine::set_minimal(m, &mut state, &q, &v).py()?;
+            }
+            Ok(PyState {
+                model: self.inner.clone(),
+                inner: state,
+            })
+        })
+    }
+
+    fn __repr__(&self) -> String {
+        let m = &self.inner;
+        format!(
+            "ukemi.Model(nbody={}, njoint={}, nq={}, nv={}, nu={}, timestep={})",
+            m.nbody(),
+            m.njoint(),
+            m.nq,
+            m.nv,
+            m.nu(),
+            m.options.timestep
+        )
+    }
+}

@@ -1,0 +1,103 @@
+//! `State`: per-rollout data with numpy views computed on access.
+use std::sync::Arc;
+
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
+use pyo3::prelude::*;
+use ukemi_engine::{Model, State};
+
+/// Simulation state of one model (positions, velocities, time, warm start).
+#[pyclass(name = "State", module = "ukemi._ukemi")]
+#[derive(Clone)]
+pub struct PyState {
+    pub model: Arc<Model>,
+    pub inner: State,
+}
+
+fn array2<'py>(py: Python<'py>, v: Vec<f64>, cols: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let rows = v.len() / cols;
+    PyArray1::from_vec(py, v).reshape([rows, cols])
+}
+
+#[pymethods]
+impl PyState {
+    /// Simulation time (s).
+    #[getter]
+    fn time(&self) -> f64 {
+        self.inner.time
+    }
+    /// Generalized positions, (nq,).
+    #[getter]
+    fn qpos<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, ukemi_engine::qpos(&self.model, &self.inner))
+    }
+    /// Generalized velocities, (nv,).
+    #[getter]
+    fn qvel<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, ukemi_engine::qvel(&self.model, &self.inner))
+    }
+    /// Body frame origins, world (m), (nbody, 3).
+    #[getter]
+    fn body_pos<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        array2(py, self.inner.body_pos(&self.model), 3)
+    }
+    /// Orientations (w, x, y, z), (nbody, 4).
+    #[getter]
+    fn body_quat<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        array2(py, self.inner.quat.clone(), 4)
+    }
+    /// Linear velocities of the body frame origins, world (m/s), (nbody, 3).
+    #[getter]
+    fn body_linvel<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        array2(py, self.inner.body_linvel(&self.model), 3)
+    }
+    /// Angular velocities, world frame (rad/s), (nbody, 3).
+    #[getter]
+    fn body_angvel<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        array2(py, self.inner.body_angvel(&self.model), 3)
+    }
+    /// Centre-of-mass positions, world (m), (nbody, 3).
+    #[getter]
+    fn com_pos<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        array2(py, self.inner.com_pos.clone(), 3)
+    }
+    /// Joint constraint impulses of the last step (N·s), (ncon,).
+    #[getter]
+    fn joint_impulse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.joint_impulse)
+    }
+    /// Discrete linear momentum (kg·m/s), (3,).
+    fn linear_momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(
+            py,
+            ukemi_engine::mechanics::linear_momentum(&self.model, &self.inner).as_slice(),
+        )
+    }
+    /// Discrete angular momentum about the origin (kg·m²/s), (3,).
+    fn angular_momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(
+            py,
+            ukemi_engine::mechanics::angular_momentum(&self.model, &self.inner).as_slice(),
+        )
+    }
+    /// Discrete total energy: kinetic + gravity + joint springs (J).
+    fn energy(&self) -> f64 {
+        ukemi_engine::mechanics::total_energy(&self.model, &self.inner)
+    }
+    /// An independent copy.
+    fn copy(&self) -> PyState {
+        self.clone()
+    }
+    fn __copy__(&self) -> PyState {
+        self.clone()
+    }
+    fn __deepcopy__(&self, _memo: &Bound<'_, PyAny>) -> PyState {
+        self.clone()
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "ukemi.State(time={}, nbody={})",
+            self.inner.time,
+            self.model.nbody()
+        )
+    }
+}

@@ -1,0 +1,56 @@
+"""ukemi: differentiable physics for robotics.
+
+Maximal-coordinate rigid-body dynamics with a variational integrator and joints as constraints
+(the Dojo paper), a Rust core, and a functional Python API in MuJoCo's vocabulary::
+
+    import ukemi
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_body("link", mass=1.0, inertia=(0.1, 0.1, 0.01), pos=(0, 0, 1))
+    b.add_joint("hinge", kind="revolute", parent="world", child="link", axis=(0, 1, 0),
+                parent_anchor=(0, 0, 1.5), child_anchor=(0, 0, 0.5))
+    model = b.compile()
+    state = model.make_state(qpos=[0.3])
+    state, info = ukemi.step(model, state)
+    traj = ukemi.rollout(model, state, nsteps=100)
+"""
+
+from __future__ import annotations
+
+from . import _ukemi
+from ._builder import JOINT_KINDS, ModelBuilder
+from ._simulate import STATUS_NAMES, Trajectory, rollout, step
+from ._ukemi import Model, State, StepInfo
+from .errors import (
+    ConvergenceError,
+    InputError,
+    InternalError,
+    MjcfError,
+    ModelError,
+    ModelMismatchError,
+    ShapeError,
+    UkemiError,
+    UnsupportedError,
+)
+
+__version__: str = _ukemi.__version__
+
+__all__ = [
+    "JOINT_KINDS",
+    "STATUS_NAMES",
+    "ConvergenceError",
+    "InputError",
+    "InternalError",
+    "MjcfError",
+    "Model",
+    "ModelBuilder",
+    "ModelError",
+    "ModelMismatchError",
+    "ShapeError",
+    "State",
+    "StepInfo",
+    "Trajectory",
+    "UkemiError",
+    "UnsupportedError",
+    "rollout",
+    "step",
+]

@@ -1,0 +1,53 @@
+"""Argument conversion with errors that name the argument (no physics here)."""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from .errors import InputError, ShapeError
+
+
+def as_float_array(name: str, value, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """Convert ``value`` to a C-contiguous float64 array, checking shape and finiteness.
+
+    Raises:
+        TypeError: ``value`` is not numeric.
+        ShapeError: the shape differs from ``shape`` (``-1`` matches any size).
+        InputError: a value is NaN or infinite.
+    """
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"`{name}` must be numeric, got {type(value).__name__}")
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise TypeError(f"`{name}` must be a numeric array: {exc}") from None
+    if arr.dtype == object or not (
+        np.issubdtype(arr.dtype, np.floating)
+        or np.issubdtype(arr.dtype, np.integer)
+        or arr.dtype == np.bool_
+    ):
+        raise TypeError(f"`{name}` must be a real numeric array, got dtype {arr.dtype}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if shape is not None:
+        ok = arr.ndim == len(shape) and all(s == -1 or s == d for s, d in zip(shape, arr.shape))
+        if not ok:
+            raise ShapeError(f"shape of `{name}`: expected {shape}, got {arr.shape}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise InputError(f"invalid input: `{name}{list(idx)}` = {arr[idx]}: must be finite")
+    return arr
+
+
+def as_vector(name: str, value, n: int) -> list[float]:
+    """A length-``n`` vector as a list of floats (for the builder)."""
+    return as_float_array(name, value, (n,)).tolist()
+
+
+def as_scalar(name: str, value) -> float:
+    """A real scalar."""
+    if isinstance(value, bool) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
+        raise TypeError(f"`{name}` must be a real number, got {type(value).__name__}")
+    return float(value)

@@ -1,0 +1,122 @@
+"""Functional stepping API: ``step`` and ``rollout`` (MuJoCo/MJX style ``f(model, state, ...)``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _ukemi
+from ._convert import as_float_array
+from .errors import ConvergenceError
+
+STATUS_NAMES: tuple[str, ...] = tuple(_ukemi.STATUS_NAMES)
+_ON_FAILURE = ("raise", "return")
+
+
+def _check_on_failure(on_failure: str) -> None:
+    if on_failure not in _ON_FAILURE:
+        raise ValueError(f"`on_failure` must be one of {_ON_FAILURE}, got {on_failure!r}")
+
+
+def _check_types(model, state) -> None:
+    if not isinstance(model, _ukemi.Model):
+        raise TypeError(f"`model` must be a ukemi.Model, got {type(model).__name__}")
+    if not isinstance(state, _ukemi.State):
+        raise TypeError(f"`state` must be a ukemi.State, got {type(state).__name__}")
+
+
+def step(model, state, ctrl=None, *, qfrc_applied=None, xfrc_applied=None, on_failure="raise"):
+    """Advance one time step. The input ``state`` is left unchanged.
+
+    Args:
+        model: ``ukemi.Model``.
+        state: ``ukemi.State`` made by ``model.make_state()``.
+        ctrl: Controls, shape (nu,); None means zeros.
+        qfrc_applied: Generalized forces on the dofs, shape (nv,) (N or N·m).
+        xfrc_applied: World wrenches ``[force, torque]`` at each body's COM, shape (nbody, 6).
+        on_failure: ``"raise"`` (default) raises ``ConvergenceError`` if the solve did not
+            converge; ``"return"`` returns the last iterate with the status in ``info``.
+
+    Returns:
+        (next_state, info): ``info.status``, ``info.iterations``, ``info.residual``,
+        ``info.complementarity``.
+
+    Raises:
+        TypeError, ShapeError, InputError, ModelMismatchError: bad arguments.
+        ConvergenceError: the solve failed and ``on_failure="raise"``.
+    """
+    _check_types(model, state)
+    _check_on_failure(on_failure)
+    ctrl = np.zeros(model.nu) if ctrl is None else as_float_array("ctrl", ctrl, (model.nu,))
+    qfrc = None if qfrc_applied is None else as_float_array("qfrc_applied", qfrc_applied, (model.nv,))
+    xfrc = None if xfrc_applied is None else as_float_array("xfrc_applied", xfrc_applied, (model.nbody, 6))
+    next_state, info = _ukemi._step(model, state, ctrl, qfrc, xfrc)
+    if on_failure == "raise" and info.status != "converged":
+        raise ConvergenceError(
+            f"step at t = {state.time:.6g} did not converge: {info.status} after "
+            f"{info.iterations} iterations, residual {info.residual:.3e}",
+            info=info, state=next_state)
+    return next_state, info
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Result of :func:`rollout`. Arrays have a leading time axis of length T + 1 (states) or T
+    (per-step reports); a rollout stopped by a failure is shorter."""
+
+    qpos: np.ndarray  #: (T+1, nq)
+    qvel: np.ndarray  #: (T+1, nv)
+    time: np.ndarray  #: (T+1,)
+    body_pos: np.ndarray  #: (T+1, nbody, 3) body frame origins, world
+    body_quat: np.ndarray  #: (T+1, nbody, 4) (w, x, y, z)
+    status: np.ndarray  #: (T,) status names
+    iterations: np.ndarray  #: (T,)
+    residual: np.ndarray  #: (T,)
+    final_state: object  #: ukemi.State after the last step
+
+    @property
+    def converged(self) -> bool:
+        """Whether every step converged."""
+        return bool(np.all(self.status == "converged"))
+
+
+def rollout(model, state, ctrls=None, *, nsteps=None, on_failure="raise") -> Trajectory:
+    """Simulate ``T`` steps in Rust with the GIL released.
+
+    Args:
+        model: ``ukemi.Model``.
+        state: Initial ``ukemi.State`` (unchanged).
+        ctrls: Controls, shape (T, nu). Omit it and pass ``nsteps=T`` for zero controls.
+        nsteps: Number of steps when ``ctrls`` is None.
+        on_failure: ``"raise"`` stops at the first failed step and raises ``ConvergenceError``
+            (with ``step_index``); ``"return"`` keeps going and reports statuses.
+
+    Returns:
+        Trajectory
+
+    Raises:
+        TypeError, ShapeError, InputError: bad arguments. ConvergenceError: see ``on_failure``.
+    """
+    _check_types(model, state)
+    _check_on_failure(on_failure)
+    if ctrls is None:
+        if nsteps is None:
+            raise TypeError("rollout needs `ctrls` of shape (T, nu) or `nsteps`")
+        if isinstance(nsteps, bool) or not isinstance(nsteps, (int, np.integer)) or nsteps < 0:
+            raise TypeError(f"`nsteps` must be a non-negative integer, got {nsteps!r}")
+        ctrls = np.zeros((int(nsteps), model.nu))
+    else:
+        ctrls = as_float_array("ctrls", ctrls, (-1, model.nu))
+        if nsteps is not None and nsteps != ctrls.shape[0]:
+            raise ValueError(f"`nsteps` = {nsteps} disagrees with ctrls.shape[0] = {ctrls.shape[0]}")
+    arrays, final = _ukemi._rollout(model, state, ctrls, on_failure == "raise")
+    status = np.asarray(STATUS_NAMES, dtype=object)[arrays["status"]].astype(str)
+    traj = Trajectory(arrays["qpos"], arrays["qvel"], arrays["time"], arrays["body_pos"],
+                      arrays["body_quat"], status, arrays["iterations"], arrays["residual"], final)
+    if on_failure == "raise" and not traj.converged:
+        k = int(np.argmax(status != "converged"))
+        raise ConvergenceError(
+            f"rollout step {k} (t = {traj.time[k]:.6g}) did not converge: {status[k]}, "
+            f"residual {traj.residual[k]:.3e}", state=final, step_index=k)
+    return traj

@@ -1,0 +1,163 @@
+"""The Python API of the engine core: shapes, conventions, physics through the bindings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import pendulum
+
+import ukemi
+
+
+def test_model_attributes(pend):
+    assert (pend.nq, pend.nv, pend.nu, pend.nbody, pend.njoint) == (1, 1, 1, 2, 1)
+    assert pend.body_names == ["world", "bob"]
+    assert pend.joint_names == ["hinge"] and pend.actuator_names == ["motor"]
+    assert pend.timestep == 0.01
+    np.testing.assert_allclose(pend.body_mass, [0.0, 1.0])
+    assert pend.body_inertia.shape == (2, 3, 3)
+    assert set(ukemi.JOINT_KINDS) >= {"fixed", "revolute", "prismatic", "spherical", "floating"}
+    assert len(ukemi.JOINT_KINDS) == 16
+
+
+def test_state_arrays_and_reference_pose(pend):
+    s = pend.make_state()
+    assert s.time == 0.0
+    np.testing.assert_allclose(s.qpos, [0.0])
+    np.testing.assert_allclose(s.body_pos, [[0, 0, 0], [0, 0, -1]], atol=1e-15)
+    np.testing.assert_allclose(s.body_quat[1], [1, 0, 0, 0])
+    s = pend.make_state(qpos=[np.pi / 2], qvel=[2.0])
+    # hinge about +y by +90°: the bob at -z swings to -x; velocity ω × r
+    np.testing.assert_allclose(s.body_pos[1], [-1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(s.body_angvel[1], [0, 2, 0], atol=1e-12)
+    np.testing.assert_allclose(s.body_linvel[1], np.cross([0, 2, 0], [-1, 0, 0]), atol=1e-12)
+    np.testing.assert_allclose(s.qvel, [2.0], atol=1e-12)
+
+
+def test_free_joint_uses_mujoco_layout(free_body):
+    q = np.array([0.1, -0.2, 1.3, np.cos(0.4), 0, np.sin(0.4), 0])
+    v = np.array([0.5, 0.0, -0.3, 0.1, 0.2, -0.7])
+    s = free_body.make_state(qpos=q, qvel=v)
+    np.testing.assert_allclose(s.qpos, q, atol=1e-14)
+    np.testing.assert_allclose(s.qvel, v, atol=1e-14)
+    np.testing.assert_allclose(s.body_pos[1], q[:3], atol=1e-15)
+    np.testing.assert_allclose(s.body_quat[1], q[3:], atol=1e-15)
+    np.testing.assert_allclose(s.body_linvel[1], v[:3], atol=1e-14)
+
+
+def test_step_is_functional_and_free_fall_is_exact():
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_body("ball", mass=1.0, inertia=(0.1, 0.1, 0.1), pos=(0, 0, 1))
+    b.add_joint("free", kind="free", parent="world", child="ball")
+    model = b.compile()
+    s0 = model.make_state()
+    s, info = ukemi.step(model, s0)
+    assert info.status == "converged" and info.converged and info.residual <= 1e-10
+    assert s0.time == 0.0 and s0.qpos[2] == 1.0  # input unchanged
+    traj = ukemi.rollout(model, s0, nsteps=100)
+    # variational integrator: z_k = z0 - g h² k (k+1) / 2 exactly (midpoint velocities)
+    k = np.arange(101)
+    z = 1.0 - 9.81 * 0.01**2 * k * (k + 1) / 2
+    np.testing.assert_allclose(traj.qpos[:, 2], z, atol=1e-12)
+    np.testing.assert_allclose(traj.time, 0.01 * k, atol=1e-12)
+    assert traj.qpos.shape == (101, 7) and traj.body_pos.shape == (101, 2, 3)
+    assert traj.status.shape == (100,) and traj.converged
+
+
+def test_actuator_torque_matches_angular_impulse():
+    """From rest with gravity off, a torque τ = gear·clamp(u) gives θ after k steps as
+    τ h² k(k+1)/2 / I for a point mass on a rod (I = m L²)."""
+    b = ukemi.ModelBuilder(timestep=0.001, gravity=(0, 0, 0))
+    b.add_body("bob", mass=2.0, inertia=(1e-6, 1e-6, 1e-6), pos=(0, 0, -0.5))
+    b.add_joint("hinge", "revolute", "world", "bob", axis=(0, 1, 0), child_anchor=(0, 0, 0.5))
+    b.add_actuator("m", joint="hinge", gear=3.0, ctrlrange=(-0.5, 0.5))
+    model = b.compile()
+    traj = ukemi.rollout(model, model.make_state(), ctrls=np.full((20, 1), 7.0))  # clamped to 0.5
+    I = 2.0 * 0.25 + 1e-6
+    k = 20
+    expected = 1.5 * 0.001**2 * k * (k + 1) / 2 / I
+    assert traj.qpos[-1, 0] == pytest.approx(expected, rel=1e-3)
+
+
+def test_pendulum_period_through_python():
+    model = pendulum(timestep=0.01, actuated=False)
+    traj = ukemi.rollout(model, model.make_state(qpos=[0.01]), nsteps=1000)
+    x, t = traj.qpos[:, 0], traj.time
+    up = np.where((x[:-1] < 0) & (x[1:] >= 0))[0]
+    tc = t[up] - x[up] * (t[up + 1] - t[up]) / (x[up + 1] - x[up])
+    period = np.diff(tc).mean()
+    assert period == pytest.approx(2 * np.pi * np.sqrt(1 / 9.81), rel=5e-3)
+
+
+def test_damping_dissipates_and_energy_is_conserved_without_it():
+    undamped = pendulum(actuated=False)
+    damped = pendulum(damping=0.5, actuated=False)
+    for model, expect_loss in ((undamped, False), (damped, True)):
+        s0 = model.make_state(qpos=[1.0])
+        traj = ukemi.rollout(model, s0, nsteps=1000)
+        loss = s0.energy() - traj.final_state.energy()
+        if expect_loss:
+            assert loss > 1.0
+        else:
+            assert abs(loss) < 1e-3 * 9.81 * (1 - np.cos(1.0))  # 0.1% of the swing energy
+
+
+def test_applied_forces_and_wrenches(free_body):
+    s = free_body.make_state()
+    f = np.zeros((2, 6))
+    f[1, :3] = [2.0, 0.0, 0.0]  # 1 m/s² on a 2 kg body
+    s1, _ = ukemi.step(free_body, s, xfrc_applied=f)
+    np.testing.assert_allclose(s1.qvel[:3], [0.01, 0, 0], atol=1e-12)
+    s2, _ = ukemi.step(free_body, s, qfrc_applied=[0, 0, 4.0, 0, 0, 0])
+    np.testing.assert_allclose(s2.qvel[:3], [0, 0, 0.02], atol=1e-12)
+
+
+def test_with_options_returns_new_model(pend):
+    m2 = pend.with_options(timestep=0.002, rtol=1e-12)
+    assert m2.timestep == 0.002 and pend.timestep == 0.01
+    s, _ = ukemi.step(m2, m2.make_state(qpos=[0.2]))
+    assert s.time == pytest.approx(0.002)
+
+
+def test_nonconvergence_is_reported_not_silent(pend):
+    tight = pend.with_options(max_iter=1, rtol=1e-300)
+    s0 = tight.make_state(qpos=[1.0], qvel=[3.0])
+    with pytest.raises(ukemi.ConvergenceError) as err:
+        ukemi.step(tight, s0)
+    assert err.value.info.status == "max_iterations"
+    s, info = ukemi.step(tight, s0, on_failure="return")
+    assert info.status == "max_iterations" and not info.converged
+    traj = ukemi.rollout(tight, s0, nsteps=5, on_failure="return")
+    assert list(traj.status) == ["max_iterations"] * 5
+    with pytest.raises(ukemi.ConvergenceError) as err:
+        ukemi.rollout(tight, s0, nsteps=5)
+    assert err.value.step_index == 0
+
+
+def test_fast_spin_is_reported_never_a_crash(free_body):
+    """|ω| must stay below 2/h (the quaternion step map's domain): a spin past it fails cleanly."""
+    s = free_body.make_state(qvel=[0, 0, 0, 0, 0, 250.0])  # 2/h = 200 rad/s
+    s1, info = ukemi.step(free_body, s, on_failure="return")
+    assert info.status != "converged"
+    assert np.all(np.isfinite(s1.qpos))
+
+
+def test_four_bar_loop_through_python():
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_body("crank", 1.0, (1 / 12, 1 / 12, 1e-3), pos=(0, 0, 0.5))
+    b.add_body("coupler", 1.0, (1e-3, 1 / 3, 1 / 3), pos=(1, 0, 1))
+    b.add_body("rocker", 1.0, (1 / 12, 1 / 12, 1e-3), pos=(2, 0, 0.5))
+    y = (0, 1, 0)
+    b.add_joint("a", "revolute", "world", "crank", axis=y, child_anchor=(0, 0, -0.5))
+    b.add_joint("b", "revolute", "crank", "coupler", axis=y, parent_anchor=(0, 0, 0.5),
+                child_anchor=(-1, 0, 0))
+    b.add_joint("c", "revolute", "coupler", "rocker", axis=y, parent_anchor=(1, 0, 0),
+                child_anchor=(0, 0, 0.5))
+    b.add_joint("d", "revolute", "rocker", "world", axis=y, parent_anchor=(0, 0, -0.5),
+                child_anchor=(2, 0, 0), loop=True)
+    model = b.compile()
+    assert model.nq == 3
+    traj = ukemi.rollout(model, model.make_state(qvel=[1.0, -1.0, 1.0]), nsteps=500)
+    dist = np.linalg.norm(traj.body_pos[:, 3] - [2.0, 0.0, 0.0], axis=1)
+    np.testing.assert_allclose(dist, 0.5, atol=1e-8)
+    assert np.ptp(traj.qpos[:, 0]) > 1.0
