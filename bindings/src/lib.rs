@@ -15,6 +15,7 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<step::PyStepInfo>()?;
     m.add_function(wrap_pyfunction!(step::step, m)?)?;
     m.add_function(wrap_pyfunction!(step::rollout, m)?)?;
+    m.add_function(wrap_pyfunction!(step::signed_distances, m)?)?;
     let kinds: Vec<&str> = ukemi_engine::JointKind::ALL
         .iter()
         .map(|k| k.name())

@@ -4,7 +4,10 @@ use std::sync::Arc;
 use nalgebra::{Matrix3, Vector3};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
-use ukemi_engine::{ActuatorSpec, BodySpec, JointKind, JointSpec, Model, ModelBuilder, State};
+use ukemi_engine::{
+    ActuatorSpec, BodySpec, ContactModel, GeomSpec, JointKind, JointSpec, Model, ModelBuilder,
+    Shape, State,
+};
 
 use crate::errors::{IntoPy, ModelError, guard};
 use crate::state::PyState;
@@ -91,6 +94,92 @@ impl PyModelBuilder {
         });
     }
 
+    #[allow(clippy::too_many_arguments)]
+    fn add_geom(
+        &mut self,
+        name: String,
+        body: String,
+        shape: &str,
+        size: Vec<f64>,
+        pos: [f64; 3],
+        quat: [f64; 4],
+        friction: f64,
+        contact: Option<&str>,
+        contype: u32,
+        conaffinity: u32,
+    ) -> PyResult<()> {
+        let bad =
+            |what: String| ModelError::new_err(format!("invalid model: `geom[{name}].{what}"));
+        let need = |n: usize| -> PyResult<()> {
+            if size.len() < n {
+                return Err(bad(format!(
+                    "size` = {size:?}: shape {shape:?} needs {n} size values"
+                )));
+            }
+            Ok(())
+        };
+        let shape = match shape {
+            "plane" => Shape::Plane,
+            "point" => Shape::Point,
+            "sphere" => {
+                need(1)?;
+                Shape::Sphere { radius: size[0] }
+            }
+            "capsule" => {
+                need(2)?;
+                Shape::Capsule {
+                    radius: size[0],
+                    half_length: size[1],
+                }
+            }
+            "cylinder" => {
+                need(2)?;
+                Shape::Cylinder {
+                    radius: size[0],
+                    half_length: size[1],
+                }
+            }
+            "box" => {
+                need(3)?;
+                Shape::Box {
+                    half_extents: Vector3::new(size[0], size[1], size[2]),
+                }
+            }
+            "ellipsoid" => {
+                need(3)?;
+                Shape::Ellipsoid {
+                    radii: Vector3::new(size[0], size[1], size[2]),
+                }
+            }
+            other => {
+                return Err(bad(format!(
+                    "shape` = {other:?}: expected one of plane, sphere, capsule, box, cylinder, ellipsoid, point"
+                )));
+            }
+        };
+        let model = match contact {
+            None => None,
+            Some(m) => Some(ContactModel::from_name(m).ok_or_else(|| {
+                bad(format!(
+                    "contact` = {m:?}: expected \"nonlinear\", \"linear\", \"impact\" or None"
+                ))
+            })?),
+        };
+        let mut g = GeomSpec::new(&name, &body, shape)
+            .pos(pos)
+            .quat(quat)
+            .friction(friction)
+            .model(model);
+        g.contype = contype;
+        g.conaffinity = conaffinity;
+        self.inner.add_geom(g);
+        Ok(())
+    }
+
+    fn add_exclude(&mut self, body_a: &str, body_b: &str) {
+        self.inner.add_exclude(body_a, body_b);
+    }
+
     fn compile(&self) -> PyResult<PyModel> {
         guard(|| {
             Ok(PyModel {
@@ -133,10 +222,45 @@ impl PyModel {
     fn njoint(&self) -> usize {
         self.inner.njoint()
     }
-    /// Number of collision geometries (contact arrives with issue #3).
+    /// Number of collision geometries.
     #[getter]
     fn ngeom(&self) -> usize {
-        0
+        self.inner.geoms.len()
+    }
+    #[getter]
+    fn geom_names(&self) -> Vec<String> {
+        self.inner.geoms.iter().map(|g| g.name.clone()).collect()
+    }
+    /// Number of contact candidates (decided at compile time).
+    #[getter]
+    fn ncontact(&self) -> usize {
+        self.inner.ncontact()
+    }
+    /// Contact candidates as (geom_a, geom_b, model) names.
+    #[getter]
+    fn contact_pairs(&self) -> Vec<(String, String, &'static str)> {
+        let g = &self.inner.geoms;
+        self.inner
+            .contacts
+            .iter()
+            .map(|c| {
+                (
+                    g[c.geom_a].name.clone(),
+                    g[c.geom_b].name.clone(),
+                    c.model.name(),
+                )
+            })
+            .collect()
+    }
+    /// Number of limited joint dofs.
+    #[getter]
+    fn nlimit(&self) -> usize {
+        self.inner.nlimit()
+    }
+    /// Unknowns of one step per effect (what the scene pays for).
+    #[getter]
+    fn variable_counts(&self) -> Vec<(&'static str, usize)> {
+        self.inner.variable_counts()
     }
     /// Number of joint constraint rows (impulse unknowns).
     #[getter]
@@ -219,14 +343,18 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, max_iter=None, max_ls=None, regularization=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None))]
+    #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
         timestep: Option<f64>,
         gravity: Option<[f64; 3]>,
         rtol: Option<f64>,
+        kappa_tol: Option<f64>,
         max_iter: Option<usize>,
         max_ls: Option<usize>,
+        undercut: Option<f64>,
+        warm_start: Option<bool>,
         regularization: Option<f64>,
     ) -> PyResult<PyModel> {
         guard(|| {
@@ -237,6 +365,9 @@ impl PyModel {
             o.max_iter = max_iter.unwrap_or(o.max_iter);
             o.max_ls = max_ls.unwrap_or(o.max_ls);
             o.regularization = regularization.unwrap_or(o.regularization);
+            o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);
+            o.undercut = undercut.unwrap_or(o.undercut);
+            o.warm_start = warm_start.unwrap_or(o.warm_start);
             Ok(PyModel {
                 inner: Arc::new(self.inner.with_options(o).py()?),
             })

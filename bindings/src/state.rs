@@ -65,6 +65,12 @@ impl PyState {
     fn joint_impulse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_slice(py, &self.inner.joint_impulse)
     }
+    /// Contact impulses of the last step per candidate, contact frame (normal, t1, t2) (N·s),
+    /// (ncontact, 3). Divide by the time step for forces.
+    #[getter]
+    fn contact_impulse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        array2(py, self.inner.contact_impulse(&self.model), 3)
+    }
     /// Discrete linear momentum (kg·m/s), (3,).
     fn linear_momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_slice(

@@ -98,6 +98,22 @@ pub fn step(
     })
 }
 
+/// Signed distance of every contact candidate (m, negative = penetration), (ncontact,).
+#[pyfunction]
+pub fn signed_distances<'py>(
+    py: Python<'py>,
+    model: &PyModel,
+    state: &PyState,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    guard(|| {
+        same_model(model, state)?;
+        Ok(PyArray1::from_vec(
+            py,
+            ukemi_engine::contact::signed_distances(&model.inner, &state.inner),
+        ))
+    })
+}
+
 /// Roll out `ctrls` (nstep, nu) in Rust with the GIL released. Returns a dict of arrays and the
 /// final state; stops after the first failed step when `stop_on_failure`.
 #[pyfunction]
@@ -152,6 +168,7 @@ struct Recorder {
     time: Vec<f64>,
     body_pos: Vec<f64>,
     body_quat: Vec<f64>,
+    min_distance: Vec<f64>,
     status: Vec<u8>,
     iterations: Vec<i64>,
     residual: Vec<f64>,
@@ -166,6 +183,7 @@ impl Recorder {
             time: Vec::with_capacity(n),
             body_pos: Vec::with_capacity(n * nb * 3),
             body_quat: Vec::with_capacity(n * nb * 4),
+            min_distance: Vec::with_capacity(n),
             status: Vec::with_capacity(nstep),
             iterations: Vec::with_capacity(nstep),
             residual: Vec::with_capacity(nstep),
@@ -180,6 +198,9 @@ impl Recorder {
         self.time.push(s.time);
         self.body_pos.extend(s.body_pos(m));
         self.body_quat.extend_from_slice(&s.quat);
+        let d = ukemi_engine::contact::signed_distances(m, s);
+        self.min_distance
+            .push(d.iter().copied().fold(f64::INFINITY, f64::min));
     }
     fn record_report(&mut self, r: &StepReport) {
         self.status.push(r.status.code());
@@ -206,6 +227,7 @@ impl Recorder {
             "body_quat",
             PyArray1::from_vec(py, self.body_quat).reshape([n, nb, 4])?,
         )?;
+        d.set_item("min_distance", PyArray1::from_vec(py, self.min_distance))?;
         d.set_item("status", PyArray1::from_vec(py, self.status))?;
         d.set_item("iterations", PyArray1::from_vec(py, self.iterations))?;
         d.set_item("residual", PyArray1::from_vec(py, self.residual))?;

@@ -25,6 +25,7 @@
 #![warn(missing_docs)]
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
+pub mod contact;
 pub mod error;
 pub mod integrator;
 pub mod joints;
@@ -35,9 +36,11 @@ pub mod solver;
 pub mod state;
 pub mod step;
 
+pub use contact::ContactModel;
+pub use contact::geometry::Shape;
 pub use error::{Error, Result};
 pub use joints::coordinates::{qpos, qvel, set_minimal};
 pub use joints::{Joint, JointKind};
-pub use model::{ActuatorSpec, BodySpec, JointSpec, Model, ModelBuilder, Options};
+pub use model::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, Model, ModelBuilder, Options};
 pub use state::{SolveStatus, State, StepReport, Workspace};
 pub use step::{AppliedForces, rollout, step, step_with};

@@ -25,6 +25,9 @@ pub struct State {
     pub angvel_b: Vec<f64>,
     /// Joint constraint impulses of the last step (N·s), the solver's warm start. Shape (ncon,).
     pub joint_impulse: Vec<f64>,
+    /// Interior-point variables of every contact candidate then every joint limit (their node
+    /// layouts, see `solver::inequality`), from the last step.
+    pub ineq_vars: Vec<f64>,
     pub(crate) topology_id: u64,
 }
 
@@ -39,8 +42,10 @@ impl State {
             com_linvel: vec![0.0; 3 * n],
             angvel_b: vec![0.0; 3 * n],
             joint_impulse: vec![0.0; model.ncon()],
+            ineq_vars: Vec::new(),
             topology_id: model.topology_id(),
         };
+        s.ineq_vars = neutral_ineq_vars(model);
         for (b, body) in model.bodies.iter().enumerate() {
             s.set_pose(b, &body.ref_pose);
         }
@@ -122,6 +127,44 @@ impl State {
     }
 }
 
+/// The neutral interior point (γ = s = 1, cones at e) for every inequality node.
+fn neutral_ineq_vars(model: &Model) -> Vec<f64> {
+    use crate::contact::ContactModel;
+    let mut v = Vec::new();
+    for c in &model.contacts {
+        let mut x = vec![1.0; c.model.dim()];
+        if c.model == ContactModel::Nonlinear {
+            x[3] = 0.0;
+            x[4] = 0.0;
+            x[6] = 0.0;
+            x[7] = 0.0;
+        }
+        v.extend(x);
+    }
+    v.extend(std::iter::repeat_n(1.0, 4 * model.nlimit()));
+    v
+}
+
+impl State {
+    /// Contact impulses of the last step in each candidate's contact frame `(normal, t1, t2)`
+    /// (N·s). Shape (ncontact, 3).
+    pub fn contact_impulse(&self, model: &Model) -> Vec<f64> {
+        use crate::contact::ContactModel;
+        let mut out = Vec::with_capacity(3 * model.ncontact());
+        let mut k = 0;
+        for c in &model.contacts {
+            let x = &self.ineq_vars[k..k + c.model.dim()];
+            out.extend(match c.model {
+                ContactModel::Impact => [x[0], 0.0, 0.0],
+                ContactModel::Nonlinear => [x[0], x[3], x[4]],
+                ContactModel::Linear => [x[0], x[4] - x[5], x[6] - x[7]],
+            });
+            k += c.model.dim();
+        }
+        out
+    }
+}
+
 /// How a solve ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SolveStatus {
@@ -185,6 +228,16 @@ pub struct Workspace {
     /// Free-coordinate Jacobian at the current configuration, per joint `nfree × 12`.
     pub(crate) free_jac: Vec<f64>,
     pub(crate) free_adr: Vec<usize>,
+    /// Contact frames at the current configuration.
+    pub(crate) contact_now: Vec<crate::contact::ContactFrame>,
+    /// Signed distance and its gradient row at the trial next configuration, per contact.
+    pub(crate) contact_phi: Vec<f64>,
+    pub(crate) contact_dphi: Vec<[f64; 12]>,
+    /// First limited dof of each joint in `limit_dtheta`.
+    pub(crate) limit_adr: Vec<usize>,
+    /// `∂θ/∂(δx⁺)` of each limited dof at the trial next configuration.
+    pub(crate) limit_dtheta: Vec<[f64; 12]>,
+    pub(crate) delta_aff: Vec<f64>,
     pub(crate) topology_id: u64,
 }
 
@@ -200,7 +253,23 @@ impl Workspace {
             free_adr.push(nfree);
             nfree += j.nfree() * 12;
         }
+        let mut limit_adr = Vec::with_capacity(model.njoint());
+        let mut nlim = 0;
+        for j in &model.joints {
+            limit_adr.push(nlim);
+            nlim += j.limits.len();
+        }
+        let empty = crate::contact::ContactFrame {
+            phi: 0.0,
+            jac: [[0.0; 12]; 3],
+        };
         Workspace {
+            contact_now: vec![empty; model.ncontact()],
+            contact_phi: vec![0.0; model.ncontact()],
+            contact_dphi: vec![[0.0; 12]; model.ncontact()],
+            limit_adr,
+            limit_dtheta: vec![[0.0; 12]; nlim],
+            delta_aff: vec![0.0; n],
             matrix: BlockMatrix::new(&t.pattern),
             w: vec![0.0; n],
             w_trial: vec![0.0; n],

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from . import _ukemi
 from ._builder import JOINT_KINDS, ModelBuilder
-from ._simulate import STATUS_NAMES, Trajectory, rollout, step
+from ._simulate import STATUS_NAMES, Trajectory, rollout, signed_distances, step
 from ._ukemi import Model, State, StepInfo
 from .errors import (
     ConvergenceError,
@@ -52,5 +52,6 @@ __all__ = [
     "UkemiError",
     "UnsupportedError",
     "rollout",
+    "signed_distances",
     "step",
 ]

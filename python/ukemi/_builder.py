@@ -20,6 +20,27 @@ def _inertia(name: str, value) -> list[float]:
     raise ShapeError(f"shape of `{name}`: expected (3,) principal moments or (3, 3), got {arr.shape}")
 
 
+def _quat_z_to(n: np.ndarray) -> list[float]:
+    """Unit quaternion (w, x, y, z) rotating +z onto the direction ``n``."""
+    norm = float(np.linalg.norm(n))
+    if norm == 0.0:
+        raise ValueError("`normal` must be non-zero")
+    n = n / norm
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(np.dot(z, n))
+    if c < -1.0 + 1e-12:
+        return [0.0, 1.0, 0.0, 0.0]
+    axis = np.cross(z, n)
+    q = np.array([1.0 + c, *axis])
+    return (q / np.linalg.norm(q)).tolist()
+
+
+def _bits(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value < 2**32:
+        raise TypeError(f"`{name}` must be an integer bitmask in [0, 2**32), got {value!r}")
+    return int(value)
+
+
 def _per_dof(name: str, value) -> list[float]:
     arr = as_float_array(name, value)
     if arr.ndim > 1:
@@ -80,7 +101,8 @@ class ModelBuilder:
             stiffness: Spring stiffness, scalar or one per free dof (N/m, N·m/rad).
             damping: Damping, scalar or one per free dof (N·s/m, N·m·s/rad).
             spring_ref: Spring rest position in the joint's qpos units (default: reference pose).
-            range: Joint limits per free dof (arrives with the contact solver; raises for now).
+            range: Limits ``(lower, upper)`` (m or rad): one pair for a one-dof joint or one per
+                free dof. Solved as inequality constraints by the interior-point method.
             loop: The joint closes a kinematic loop (not part of the spanning tree, no qpos).
         """
         if not isinstance(kind, str):
@@ -111,11 +133,44 @@ class ModelBuilder:
             raise TypeError(f"`dof` must be a non-negative integer, got {dof!r}")
         self._b.add_actuator(str(name), str(joint), int(dof), as_scalar("gear", gear), rng)
 
-    def add_geom(self, name: str, body: str, shape: str, size, **kwargs) -> None:
-        """Collision geometry. Contact arrives with the interior-point contact solver (issue #3)."""
-        raise UnsupportedError(
-            f"unsupported: geom[{name}]: collision geometry and contact are not available yet"
-        )
+    def add_geom(self, name: str, body: str, shape: str, size=(), pos=(0.0, 0.0, 0.0),
+                 quat=(1.0, 0.0, 0.0, 0.0), friction: float = 0.5, contact: str | None = "nonlinear",
+                 normal=None, contype: int = 1, conaffinity: int = 1) -> None:
+        """Add a collision geometry to ``body`` (``"world"`` for static geometry).
+
+        Args:
+            name: Unique name.
+            body: Body name.
+            shape: ``"plane"``, ``"sphere"``, ``"capsule"``, ``"box"``, ``"cylinder"``,
+                ``"ellipsoid"`` or ``"point"``.
+            size: MuJoCo's sizes: sphere (radius,), capsule and cylinder (radius, half-length
+                along the geom z axis), box (three half-extents), ellipsoid (three radii); plane
+                and point take none.
+            pos: Geom origin in the body frame (m). For a plane: a point on it.
+            quat: Geom orientation in the body frame (w, x, y, z). A plane's normal is its +z.
+            normal: Plane only: the unit normal in the body frame (sets ``quat``).
+            friction: Coulomb coefficient; a pair uses the larger of its two geoms' (MuJoCo).
+            contact: ``"nonlinear"`` (exact cone), ``"linear"`` (4-sided pyramid), ``"impact"``
+                (frictionless) or None (never collides). A pair is frictionless if either geom
+                says ``"impact"`` or its friction is 0, else linear if either says ``"linear"``.
+            contype, conaffinity: MuJoCo's collision bitmasks.
+        """
+        if not isinstance(shape, str):
+            raise TypeError(f"`shape` must be a string, got {type(shape).__name__}")
+        if contact is not None and not isinstance(contact, str):
+            raise TypeError(f"`contact` must be a string or None, got {type(contact).__name__}")
+        if normal is not None:
+            if shape != "plane":
+                raise ValueError(f"geom[{name}]: `normal` applies to planes only, not {shape!r}")
+            quat = _quat_z_to(as_float_array("normal", normal, (3,)))
+        size_list = as_float_array("size", size).ravel().tolist()
+        self._b.add_geom(str(name), str(body), shape, size_list, as_vector("pos", pos, 3),
+                         as_vector("quat", quat, 4), as_scalar("friction", friction), contact,
+                         _bits("contype", contype), _bits("conaffinity", conaffinity))
+
+    def add_exclude(self, body_a: str, body_b: str) -> None:
+        """Never collide the geoms of these two bodies (MuJoCo's ``contact/exclude``)."""
+        self._b.add_exclude(str(body_a), str(body_b))
 
     def compile(self):
         """Validate and compile.

@@ -70,6 +70,7 @@ class Trajectory:
     time: np.ndarray  #: (T+1,)
     body_pos: np.ndarray  #: (T+1, nbody, 3) body frame origins, world
     body_quat: np.ndarray  #: (T+1, nbody, 4) (w, x, y, z)
+    min_distance: np.ndarray  #: (T+1,) least signed distance over contact candidates (inf if none)
     status: np.ndarray  #: (T,) status names
     iterations: np.ndarray  #: (T,)
     residual: np.ndarray  #: (T,)
@@ -79,6 +80,15 @@ class Trajectory:
     def converged(self) -> bool:
         """Whether every step converged."""
         return bool(np.all(self.status == "converged"))
+
+
+def signed_distances(model, state) -> np.ndarray:
+    """Signed distance of every contact candidate (m, negative = penetration), (ncontact,).
+
+    Candidates are listed by ``model.contact_pairs``.
+    """
+    _check_types(model, state)
+    return _ukemi.signed_distances(model, state)
 
 
 def rollout(model, state, ctrls=None, *, nsteps=None, on_failure="raise") -> Trajectory:
@@ -113,7 +123,7 @@ def rollout(model, state, ctrls=None, *, nsteps=None, on_failure="raise") -> Tra
     arrays, final = _ukemi._rollout(model, state, ctrls, on_failure == "raise")
     status = np.asarray(STATUS_NAMES, dtype=object)[arrays["status"]].astype(str)
     traj = Trajectory(arrays["qpos"], arrays["qvel"], arrays["time"], arrays["body_pos"],
-                      arrays["body_quat"], status, arrays["iterations"], arrays["residual"], final)
+                      arrays["body_quat"], arrays["min_distance"], status, arrays["iterations"], arrays["residual"], final)
     if on_failure == "raise" and not traj.converged:
         k = int(np.argmax(status != "converged"))
         raise ConvergenceError(

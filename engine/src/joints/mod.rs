@@ -95,6 +95,9 @@ pub struct Joint {
     pub damping: Vec<f64>,
     /// Spring rest position in `qpos` units (a quaternion for ball rotations).
     pub spring_ref: Vec<f64>,
+    /// Limits `(free dof, lower, upper)` on coordinates (m or rad), solved as inequality
+    /// constraints in the interior-point solve.
+    pub limits: Vec<(usize, f64, f64)>,
     /// First index in `qpos` (tree joints only).
     pub qpos_adr: usize,
     /// First index in `qvel` (tree joints only).

@@ -2,6 +2,8 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::{Actuator, Body, Model, Options, Topology};
+use crate::contact::geometry::{self, Shape};
+use crate::contact::{Contact, ContactModel, Geom};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::joints::{Joint, JointKind, RotDofs};
 use crate::math::quat;
@@ -155,6 +157,66 @@ pub struct ActuatorSpec {
     pub ctrlrange: Option<(f64, f64)>,
 }
 
+/// A collision geometry to add, posed in its body's frame.
+#[derive(Clone, Debug)]
+pub struct GeomSpec {
+    /// Unique name.
+    pub name: String,
+    /// Body name (`"world"` for static geometry such as the floor).
+    pub body: String,
+    /// Shape and sizes (m).
+    pub shape: Shape,
+    /// Geom origin in the body frame (m).
+    pub pos: Vector3<f64>,
+    /// Geom orientation in the body frame `(w, x, y, z)`.
+    pub quat: [f64; 4],
+    /// Coulomb friction coefficient (≥ 0). Default 0.5.
+    pub friction: f64,
+    /// Contact model; `None` makes the geom visual only. Default nonlinear.
+    pub model: Option<ContactModel>,
+    /// MuJoCo's `contype` bits. Default 1.
+    pub contype: u32,
+    /// MuJoCo's `conaffinity` bits. Default 1.
+    pub conaffinity: u32,
+}
+
+impl GeomSpec {
+    /// A geom of `shape` on `body` at the body origin, friction 0.5, nonlinear cone.
+    pub fn new(name: &str, body: &str, shape: Shape) -> Self {
+        GeomSpec {
+            name: name.to_string(),
+            body: body.to_string(),
+            shape,
+            pos: Vector3::zeros(),
+            quat: [1.0, 0.0, 0.0, 0.0],
+            friction: 0.5,
+            model: Some(ContactModel::Nonlinear),
+            contype: 1,
+            conaffinity: 1,
+        }
+    }
+    /// Position in the body frame.
+    pub fn pos(mut self, pos: [f64; 3]) -> Self {
+        self.pos = Vector3::from(pos);
+        self
+    }
+    /// Orientation in the body frame.
+    pub fn quat(mut self, quat: [f64; 4]) -> Self {
+        self.quat = quat;
+        self
+    }
+    /// Friction coefficient.
+    pub fn friction(mut self, mu: f64) -> Self {
+        self.friction = mu;
+        self
+    }
+    /// Contact model (`None`: never collides).
+    pub fn model(mut self, model: Option<ContactModel>) -> Self {
+        self.model = model;
+        self
+    }
+}
+
 /// Builds and validates a [`Model`].
 #[derive(Clone, Debug, Default)]
 pub struct ModelBuilder {
@@ -163,6 +225,8 @@ pub struct ModelBuilder {
     bodies: Vec<BodySpec>,
     joints: Vec<JointSpec>,
     actuators: Vec<ActuatorSpec>,
+    geoms: Vec<GeomSpec>,
+    excludes: Vec<(String, String)>,
 }
 
 impl ModelBuilder {
@@ -207,6 +271,19 @@ impl ModelBuilder {
     pub fn add_actuator(&mut self, a: ActuatorSpec) {
         self.actuators.push(a);
     }
+    /// Add a collision geometry (fluent).
+    pub fn geom(mut self, g: GeomSpec) -> Self {
+        self.geoms.push(g);
+        self
+    }
+    /// Add a collision geometry.
+    pub fn add_geom(&mut self, g: GeomSpec) {
+        self.geoms.push(g);
+    }
+    /// Never collide the geoms of these two bodies (MuJoCo's `contact/exclude`).
+    pub fn add_exclude(&mut self, body_a: &str, body_b: &str) {
+        self.excludes.push((body_a.to_string(), body_b.to_string()));
+    }
 
     /// Validate everything and compile the immutable model.
     pub fn compile(&self) -> Result<Model> {
@@ -227,7 +304,9 @@ impl ModelBuilder {
         }
         let parent_joint = spanning_tree(&bodies, &joints)?;
         assign_addresses(&mut joints);
-        let topology = Topology::new(bodies.len(), &joints, &parent_joint)
+        let geoms = self.compile_geoms(&names, &bodies)?;
+        let contacts = self.compile_pairs(&geoms, &joints, &names)?;
+        let topology = Topology::new(bodies.len(), &joints, &parent_joint, &geoms, &contacts)
             .map_err(|e| Error::model("joints", "graph", e))?;
         let actuators = self.compile_actuators(&joints)?;
         let nq = joints.iter().filter(|j| !j.is_loop).map(Joint::nq).sum();
@@ -237,6 +316,8 @@ impl ModelBuilder {
             bodies,
             joints,
             actuators,
+            geoms,
+            contacts,
             nq,
             nv,
             qpos0: vec![],
@@ -301,6 +382,108 @@ impl ModelBuilder {
         Ok(out)
     }
 
+    fn compile_geoms(&self, names: &[&str], bodies: &[Body]) -> Result<Vec<Geom>> {
+        let mut out: Vec<Geom> = Vec::with_capacity(self.geoms.len());
+        for spec in &self.geoms {
+            let f = |field: &str| format!("geom[{}].{field}", spec.name);
+            ensure!(
+                !out.iter().any(|g| g.name == spec.name),
+                Error::model(f("name"), &spec.name, "duplicate geom name")
+            );
+            let body = names
+                .iter()
+                .position(|n| *n == spec.body)
+                .ok_or_else(|| Error::model(f("body"), &spec.body, "unknown body"))?;
+            check_shape(&spec.shape, &f("size"))?;
+            check_finite(spec.pos.as_slice(), &f("pos"))?;
+            check_unit_quat(&spec.quat, &f("quat"))?;
+            ensure!(
+                spec.friction.is_finite() && spec.friction >= 0.0,
+                Error::model(f("friction"), spec.friction, "must be finite and >= 0")
+            );
+            let com = bodies[body].com;
+            out.push(Geom {
+                name: spec.name.clone(),
+                body,
+                shape: spec.shape.clone(),
+                pos: spec.pos - com,
+                rot: quat::rotation(&quat::from_wxyz(&spec.quat)),
+                friction: spec.friction,
+                model: spec.model,
+                contype: spec.contype,
+                conaffinity: spec.conaffinity,
+            });
+        }
+        Ok(out)
+    }
+
+    /// MuJoCo's pair rules: different bodies, not both static, not joined by a joint (unless one
+    /// is the world), not excluded, and `contype & conaffinity` matching one way or the other.
+    fn compile_pairs(
+        &self,
+        geoms: &[Geom],
+        joints: &[Joint],
+        names: &[&str],
+    ) -> Result<Vec<Contact>> {
+        let mut excluded = Vec::new();
+        for (a, b) in &self.excludes {
+            let find = |n: &String| {
+                names
+                    .iter()
+                    .position(|x| x == n)
+                    .ok_or_else(|| Error::model("exclude", n, "unknown body"))
+            };
+            excluded.push((find(a)?, find(b)?));
+        }
+        // parent-child filtering, except against the world (MuJoCo's filterparent)
+        let linked = |a: usize, b: usize| {
+            (a != 0
+                && b != 0
+                && joints
+                    .iter()
+                    .any(|j| (j.parent == a && j.child == b) || (j.parent == b && j.child == a)))
+                || excluded
+                    .iter()
+                    .any(|&(x, y)| (x == a && y == b) || (x == b && y == a))
+        };
+        let mut out = Vec::new();
+        for i in 0..geoms.len() {
+            for j in i + 1..geoms.len() {
+                let (ga, gb) = (&geoms[i], &geoms[j]);
+                let (Some(ma), Some(mb)) = (ga.model, gb.model) else {
+                    continue;
+                };
+                let affinity =
+                    (ga.contype & gb.conaffinity) != 0 || (gb.contype & ga.conaffinity) != 0;
+                if ga.body == gb.body
+                    || (ga.body == 0 && gb.body == 0)
+                    || !affinity
+                    || linked(ga.body, gb.body)
+                {
+                    continue;
+                }
+                let friction = ga.friction.max(gb.friction);
+                let model = pair_model(ma, mb, friction);
+                let (features, swapped) =
+                    geometry::candidates(&ga.shape, &gb.shape).map_err(|e| {
+                        Error::Unsupported(format!(
+                            "contact between geom[{}] and geom[{}]: {e}",
+                            ga.name, gb.name
+                        ))
+                    })?;
+                let (a, b) = if swapped { (j, i) } else { (i, j) };
+                out.extend(features.into_iter().map(|feature| Contact {
+                    geom_a: a,
+                    geom_b: b,
+                    feature,
+                    model,
+                    friction,
+                }));
+            }
+        }
+        Ok(out)
+    }
+
     fn compile_actuators(&self, joints: &[Joint]) -> Result<Vec<Actuator>> {
         let mut out: Vec<Actuator> = Vec::new();
         for spec in &self.actuators {
@@ -338,6 +521,41 @@ impl ModelBuilder {
         }
         Ok(out)
     }
+}
+
+/// Frictionless if either geom asks for impact or the pair's friction is 0, else linear if either
+/// asks for the pyramid, else the nonlinear cone.
+fn pair_model(a: ContactModel, b: ContactModel, friction: f64) -> ContactModel {
+    use ContactModel::*;
+    if a == Impact || b == Impact || friction == 0.0 {
+        Impact
+    } else if a == Linear || b == Linear {
+        Linear
+    } else {
+        Nonlinear
+    }
+}
+
+fn check_shape(shape: &Shape, field: &str) -> Result<()> {
+    let sizes: Vec<f64> = match shape {
+        Shape::Plane | Shape::Point => vec![],
+        Shape::Sphere { radius } => vec![*radius],
+        Shape::Capsule {
+            radius,
+            half_length,
+        }
+        | Shape::Cylinder {
+            radius,
+            half_length,
+        } => vec![*radius, *half_length],
+        Shape::Box { half_extents } => half_extents.as_slice().to_vec(),
+        Shape::Ellipsoid { radii } => radii.as_slice().to_vec(),
+    };
+    ensure!(
+        sizes.iter().all(|x| x.is_finite() && *x > 0.0),
+        Error::model(field, &sizes, "sizes must be finite and > 0")
+    );
+    Ok(())
 }
 
 fn check_finite(v: &[f64], field: &str) -> Result<()> {
@@ -452,12 +670,6 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
     );
     check_finite(spec.parent_anchor.as_slice(), &f("parent_anchor"))?;
     check_finite(spec.child_anchor.as_slice(), &f("child_anchor"))?;
-    if spec.range.is_some() {
-        return Err(Error::Unsupported(format!(
-            "joint[{}].range: joint limits are solved by the interior-point contact solver (issue #3)",
-            spec.name
-        )));
-    }
     let (pb, cb) = (&bodies[parent], &bodies[child]);
     // The axis is given in the child body frame; the joint frame is the child's reference frame,
     // which has the same orientation, so the axis is used as is.
@@ -488,6 +700,7 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         ntrans: spec.kind.ntrans(),
         rot,
         is_loop: spec.is_loop,
+        limits: compile_limits(spec, nfree)?,
         stiffness: broadcast(&spec.stiffness, nfree, &f("stiffness"))?,
         damping: broadcast(&spec.damping, nfree, &f("damping"))?,
         spring_ref: vec![],
@@ -531,6 +744,39 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         )
     );
     Ok(joint)
+}
+
+/// Limits on every free dof (one `(lower, upper)` pair each); ball rotations cannot be limited.
+fn compile_limits(spec: &JointSpec, nfree: usize) -> Result<Vec<(usize, f64, f64)>> {
+    let Some(range) = &spec.range else {
+        return Ok(vec![]);
+    };
+    let field = format!("joint[{}].range", spec.name);
+    ensure!(
+        range.len() == nfree,
+        Error::model(
+            &field,
+            range,
+            format!("need one (lower, upper) pair per free dof ({nfree})")
+        )
+    );
+    ensure!(
+        spec.kind.nrot() < 3,
+        Error::Unsupported(format!(
+            "{field}: limits on ball rotations (quaternion coordinates) are not supported"
+        ))
+    );
+    for &(lo, hi) in range {
+        ensure!(
+            lo.is_finite() && hi.is_finite() && lo < hi,
+            Error::model(&field, range, "need finite lower < upper")
+        );
+    }
+    Ok(range
+        .iter()
+        .enumerate()
+        .map(|(i, &(lo, hi))| (i, lo, hi))
+        .collect())
 }
 
 fn joint_frame_at_reference(joint: &Joint, bodies: &[Body]) -> JointFrame {

@@ -4,13 +4,14 @@ mod builder;
 mod options;
 mod topology;
 
-pub use builder::{ActuatorSpec, BodySpec, JointSpec, ModelBuilder};
+pub use builder::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, ModelBuilder};
 pub use options::Options;
 pub(crate) use topology::Topology;
 pub(crate) use topology::body_node as topology_body_node;
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::contact::{Contact, Geom};
 use crate::joints::Joint;
 use crate::joints::geometry::Pose;
 
@@ -55,6 +56,10 @@ pub struct Model {
     pub joints: Vec<Joint>,
     /// Actuators, in declaration order (`ctrl` follows it).
     pub actuators: Vec<Actuator>,
+    /// Collision geometries.
+    pub geoms: Vec<Geom>,
+    /// Contact candidates, decided at compile time.
+    pub contacts: Vec<Contact>,
     /// Number of position coordinates.
     pub nq: usize,
     /// Number of velocity coordinates.
@@ -99,6 +104,34 @@ impl Model {
         let mut m = self.clone();
         m.options = options;
         Ok(m)
+    }
+    /// Number of contact candidates.
+    pub fn ncontact(&self) -> usize {
+        self.contacts.len()
+    }
+    /// Number of limited joint dofs.
+    pub fn nlimit(&self) -> usize {
+        self.joints.iter().map(|j| j.limits.len()).sum()
+    }
+    /// Unknowns of one step per effect: `(name, count)` for body velocities, joint impulses, limit
+    /// variables and contact variables of each model. Effects a scene does not use count 0.
+    pub fn variable_counts(&self) -> Vec<(&'static str, usize)> {
+        use crate::contact::ContactModel::*;
+        let per = |m| {
+            self.contacts
+                .iter()
+                .filter(|c| c.model == m)
+                .map(|c| c.model.dim())
+                .sum::<usize>()
+        };
+        vec![
+            ("body_velocity", 6 * (self.nbody() - 1)),
+            ("joint_impulse", self.ncon()),
+            ("joint_limit", 4 * self.nlimit()),
+            ("contact_impact", per(Impact)),
+            ("contact_nonlinear_cone", per(Nonlinear)),
+            ("contact_linear_cone", per(Linear)),
+        ]
     }
     /// Identifier of the topology; a [`crate::State`] remembers it.
     pub fn topology_id(&self) -> u64 {

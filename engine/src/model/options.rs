@@ -15,6 +15,22 @@ pub struct Options {
     pub max_iter: usize,
     /// Maximum backtracking halvings per Newton iteration. Default 10.
     pub max_ls: usize,
+    /// Complementarity (κ) tolerance of the interior-point solve: converged when every
+    /// `b ∘ c` is below it. It bounds contact softness: resting contacts hover at most
+    /// `kappa_tol / γ` above the surface. Default 1e-10.
+    pub kappa_tol: f64,
+    /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 5.
+    pub undercut: f64,
+    /// Start contact and limit variables from the previous step's solution (pushed
+    /// `warm_start_margin` inside their cones) instead of the neutral point. Default false
+    /// (see BENCHMARKS.md for the measurement).
+    pub warm_start: bool,
+    /// Margin inside the cones for warm-started variables. Default 1e-6.
+    pub warm_start_margin: f64,
+    /// Fraction-to-boundary floor for orthant variables, τ_min. Default 0.95.
+    pub tau_min: f64,
+    /// Fraction-to-boundary ceiling for second-order cones, τ_max. Default 0.99.
+    pub tau_max: f64,
     /// Regularisation `ε` on constraint pivots, `-ε I`: keeps redundant constraints of closed
     /// loops (a planar four-bar in 3-D) solvable without changing the solution. Default 1e-12.
     pub regularization: f64,
@@ -29,6 +45,12 @@ impl Default for Options {
             max_iter: 30,
             max_ls: 10,
             regularization: 1e-12,
+            kappa_tol: 1e-10,
+            undercut: 5.0,
+            warm_start: false,
+            warm_start_margin: 1e-6,
+            tau_min: 0.95,
+            tau_max: 0.99,
         }
     }
 }

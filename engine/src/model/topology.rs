@@ -7,6 +7,7 @@
 //! joints come last. Trees have no fill-in; loops fill in along their cycle only.
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use crate::contact::{Contact, Geom};
 use crate::joints::Joint;
 use crate::solver::graph_ldu::BlockPattern;
 
@@ -41,6 +42,23 @@ pub(crate) struct Topology {
     /// Diagonal block offset of each joint node.
     pub joint_diag: Vec<Option<usize>>,
     pub blocks: Vec<JointBlocks>,
+    /// Node of each joint's limit variables (4 per limited dof: γ_lo, s_lo, γ_hi, s_hi).
+    pub limit_node: Vec<Option<usize>>,
+    /// (node row, body col) and (body row, node col) blocks of each limit node for the joint's
+    /// parent and child.
+    pub limit_blocks: Vec<[Option<(usize, usize)>; 2]>,
+    /// Node of each contact candidate.
+    pub contact_node: Vec<usize>,
+    /// Blocks of each contact node for the bodies of geom a and geom b.
+    pub contact_blocks: Vec<[Option<(usize, usize)>; 2]>,
+    /// Bodies of each contact's geoms (a, b).
+    pub contact_bodies: Vec<[usize; 2]>,
+    /// Whether the step has inequality variables (contacts or limits): interior-point path.
+    pub has_cones: bool,
+    /// Total (orthant pairs + second-order cones): the cone degree, eq. (51).
+    pub cone_degree: usize,
+    /// Rows of bodies and joints (the inequality nodes follow them).
+    pub smooth_dim: usize,
 }
 
 /// Graph node of a moving body.
@@ -54,6 +72,8 @@ impl Topology {
         nbody: usize,
         joints: &[Joint],
         parent_joint: &[Option<usize>],
+        geoms: &[Geom],
+        contacts: &[Contact],
     ) -> Result<Self, String> {
         let nmoving = nbody - 1;
         let mut dims = vec![6; nmoving];
@@ -68,7 +88,38 @@ impl Topology {
                 dims.push(joint.ncon());
             }
         }
+        let mut leaves = Vec::new();
+        let mut limit_node = vec![None; joints.len()];
+        for (j, joint) in joints.iter().enumerate() {
+            if !joint.limits.is_empty() {
+                limit_node[j] = Some(dims.len());
+                leaves.push(dims.len());
+                dims.push(4 * joint.limits.len());
+            }
+        }
+        let mut contact_node = Vec::with_capacity(contacts.len());
+        let mut contact_bodies = Vec::with_capacity(contacts.len());
+        let mut cone_degree = 2 * joints.iter().map(|j| j.limits.len()).sum::<usize>();
+        for c in contacts {
+            contact_node.push(dims.len());
+            leaves.push(dims.len());
+            dims.push(c.model.dim());
+            contact_bodies.push([geoms[c.geom_a].body, geoms[c.geom_b].body]);
+            let (o, q) = c.model.cones();
+            cone_degree += o + q;
+        }
         let mut edges = Vec::new();
+        for (j, joint) in joints.iter().enumerate() {
+            if let Some(n) = limit_node[j] {
+                edges.extend(body_node(joint.parent).map(|b| (n, b)));
+                edges.extend(body_node(joint.child).map(|b| (n, b)));
+            }
+        }
+        for (c, bodies) in contact_bodies.iter().enumerate() {
+            for b in bodies {
+                edges.extend(body_node(*b).map(|b| (contact_node[c], b)));
+            }
+        }
         for (j, joint) in joints.iter().enumerate() {
             let (p, c) = (body_node(joint.parent), body_node(joint.child));
             if let Some(jn) = joint_node[j] {
@@ -79,7 +130,16 @@ impl Topology {
                 edges.push((p, c));
             }
         }
-        let order = elimination_order(nmoving, joints, parent_joint, &joint_node, dims.len());
+        // inequality nodes are leaves: eliminated first
+        let mut order = leaves.clone();
+        order.extend(elimination_order(
+            nmoving,
+            joints,
+            parent_joint,
+            &joint_node,
+            dims.len(),
+            &leaves,
+        ));
         let pattern = BlockPattern::new(&dims, &edges, &order)?;
         let blk = |i: usize, j: usize| -> Option<(usize, usize)> {
             Some((pattern.block(i, j)?, pattern.block(j, i)?))
@@ -101,6 +161,20 @@ impl Topology {
                 }
             })
             .collect();
+        let pair = |n: usize, b: usize| body_node(b).and_then(|b| blk(n, b));
+        let limit_blocks = joints
+            .iter()
+            .enumerate()
+            .map(|(j, joint)| match limit_node[j] {
+                Some(n) => [pair(n, joint.parent), pair(n, joint.child)],
+                None => [None, None],
+            })
+            .collect();
+        let contact_blocks = contact_bodies
+            .iter()
+            .enumerate()
+            .map(|(c, [a, b])| [pair(contact_node[c], *a), pair(contact_node[c], *b)])
+            .collect();
         let body_diag = (0..nbody)
             .map(|b| body_node(b).and_then(|n| pattern.block(n, n)).unwrap_or(0))
             .collect();
@@ -109,6 +183,9 @@ impl Topology {
             .map(|n| n.and_then(|n| pattern.block(n, n)))
             .collect();
         let fk_order = fk_order(joints, parent_joint);
+        let smooth_dim = leaves
+            .first()
+            .map_or(pattern.total_dim(), |&n| pattern.offset(n));
         Ok(Topology {
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             fk_order,
@@ -119,6 +196,14 @@ impl Topology {
             body_diag,
             joint_diag,
             blocks,
+            has_cones: cone_degree > 0,
+            limit_node,
+            limit_blocks,
+            contact_node,
+            contact_blocks,
+            contact_bodies,
+            cone_degree,
+            smooth_dim,
         })
     }
 }
@@ -158,6 +243,7 @@ fn elimination_order(
     parent_joint: &[Option<usize>],
     joint_node: &[Option<usize>],
     nnodes: usize,
+    leaves: &[usize],
 ) -> Vec<usize> {
     // parent node of every node in the elimination tree (None = root)
     let mut up: Vec<Option<usize>> = vec![None; nnodes];
@@ -179,7 +265,7 @@ fn elimination_order(
     let mut children: Vec<Vec<usize>> = vec![Vec::new(); nnodes];
     let mut roots = Vec::new();
     for (n, parent) in up.iter().enumerate() {
-        if loops.contains(&n) {
+        if loops.contains(&n) || leaves.contains(&n) {
             continue;
         }
         match *parent {

@@ -2,4 +2,6 @@
 //! (Dojo eq. 15) with the block-sparse graph factorisation of the Newton matrix.
 pub mod dense;
 pub mod graph_ldu;
+pub(crate) mod inequality;
+pub(crate) mod ipm;
 pub(crate) mod newton;

@@ -105,6 +105,10 @@ pub(crate) fn prepare(
                 .copy_from_slice(&state.joint_impulse[adr..adr + joint.ncon()]);
         }
     }
+    if model.topology.has_cones {
+        super::inequality::prepare(model, state, ws);
+        super::inequality::initialize(model, state, ws, model.options.warm_start);
+    }
 }
 
 /// Spring + actuator + applied generalized force on the free dofs of joint `ji`.
@@ -156,13 +160,72 @@ fn add_jt_times(applied: &mut [[f64; 6]], joint: &Joint, jac: &[f64], tau: &[f64
     }
 }
 
-/// Residual at the iterate `w`; also sets `ws.next_pose`. Returns its ∞-norm.
-pub(crate) fn evaluate(model: &Model, state: &State, ws: &mut Workspace, use_trial: bool) -> f64 {
+/// Violation metrics of an iterate (eqs. 49-50).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Violation {
+    /// ∞-norm of the equality rows.
+    pub r: f64,
+    /// Largest complementarity product `|b ∘ c|` (0 without inequality nodes).
+    pub k: f64,
+}
+
+/// Residual at the iterate `w` with complementarity target `kappa`; also sets `ws.next_pose`.
+pub(crate) fn evaluate(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    use_trial: bool,
+    kappa: f64,
+) -> Violation {
+    // take the buffers out so the iterate, the residual and the rest of the workspace can be
+    // borrowed independently (no allocation: Vec moves)
+    let w = std::mem::take(if use_trial {
+        &mut ws.w_trial
+    } else {
+        &mut ws.w
+    });
+    let mut residual = std::mem::take(&mut ws.residual);
+    let v = evaluate_in(model, state, ws, &w, &mut residual, kappa);
+    *(if use_trial {
+        &mut ws.w_trial
+    } else {
+        &mut ws.w
+    }) = w;
+    ws.residual = residual;
+    v
+}
+
+fn evaluate_in(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    w: &[f64],
+    residual: &mut [f64],
+    kappa: f64,
+) -> Violation {
+    smooth_rows(model, state, ws, w, residual);
+    if model.topology.has_cones {
+        // adds contact and limit impulses to the body rows, so measure the body rows after it
+        let (r, k) = super::inequality::evaluate(model, ws, w, residual, kappa);
+        let smooth = inf_norm(&residual[..model.topology.smooth_dim]);
+        let r = if r.is_nan() || smooth.is_nan() {
+            f64::NAN
+        } else {
+            r.max(smooth)
+        };
+        Violation { r, k }
+    } else {
+        Violation {
+            r: inf_norm(residual),
+            k: 0.0,
+        }
+    }
+}
+
+/// Body and joint rows (everything but the inequality nodes).
+fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], residual: &mut [f64]) {
     let h = model.options.timestep;
     let Workspace {
-        w,
-        w_trial,
-        residual,
         next_pose,
         applied,
         jac_now,
@@ -170,7 +233,6 @@ pub(crate) fn evaluate(model: &Model, state: &State, ws: &mut Workspace, use_tri
         free_adr,
         ..
     } = ws;
-    let w: &[f64] = if use_trial { w_trial } else { w };
     for (b, body) in model.bodies.iter().enumerate().skip(1) {
         let (v, om) = w_body(model, w, b);
         let now = state.pose(b);
@@ -220,7 +282,6 @@ pub(crate) fn evaluate(model: &Model, state: &State, ws: &mut Workspace, use_tri
             add_damper_residual(model, joint, &free_jac[free_adr[ji]..], w, residual, h);
         }
     }
-    inf_norm(residual)
 }
 
 /// ∞-norm that propagates NaN (`f64::max` alone would drop it).
@@ -285,6 +346,11 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace) {
     }
     for (ji, joint) in model.joints.iter().enumerate() {
         assemble_joint(model, ws, ji, joint, h);
+    }
+    if t.has_cones {
+        let w = std::mem::take(&mut ws.w);
+        super::inequality::assemble(model, ws, &w, h);
+        ws.w = w;
     }
 }
 
@@ -373,7 +439,7 @@ fn add_damper_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint
 }
 
 /// Scale `α` so no body's `|ω + α Δω|` exceeds the step map's limit.
-fn spin_limited_step(model: &Model, ws: &Workspace) -> f64 {
+pub(crate) fn spin_limited_step(model: &Model, ws: &Workspace) -> f64 {
     let limit = MAX_SPIN_FRACTION * quat::max_angular_speed(model.options.timestep);
     let mut alpha: f64 = 1.0;
     for b in 1..model.nbody() {
@@ -386,10 +452,19 @@ fn spin_limited_step(model: &Model, ws: &Workspace) -> f64 {
     alpha
 }
 
-/// Run Newton from the prepared iterate; leaves the solution in `ws.w` and `ws.next_pose`.
+/// Solve the prepared step: plain Newton without inequality nodes, the interior-point method
+/// with them. Leaves the solution in `ws.w` and `ws.next_pose`.
 pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
+    if model.topology.has_cones {
+        super::ipm::solve(model, state, ws)
+    } else {
+        solve_newton(model, state, ws)
+    }
+}
+
+fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
     let opts = &model.options;
-    let mut norm = evaluate(model, state, ws, false);
+    let mut norm = evaluate(model, state, ws, false, 0.0).r;
     let mut report = StepReport {
         status: SolveStatus::MaxIterations,
         iterations: 0,
@@ -421,7 +496,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             for i in 0..ws.w.len() {
                 ws.w_trial[i] = ws.w[i] + alpha * ws.delta[i];
             }
-            let trial = evaluate(model, state, ws, true);
+            let trial = evaluate(model, state, ws, true, 0.0).r;
             if trial < norm || trial <= opts.rtol {
                 std::mem::swap(&mut ws.w, &mut ws.w_trial);
                 norm = trial;
@@ -431,7 +506,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             alpha *= 0.5;
         }
         if !accepted {
-            norm = evaluate(model, state, ws, false);
+            norm = evaluate(model, state, ws, false, 0.0).r;
             report.status = SolveStatus::LineSearchFailed;
             break;
         }
@@ -463,6 +538,9 @@ pub(crate) fn write_state(model: &Model, state: &mut State, ws: &Workspace) {
             state.joint_impulse[adr..adr + joint.ncon()]
                 .copy_from_slice(&ws.w[o..o + joint.ncon()]);
         }
+    }
+    if model.topology.has_cones {
+        super::inequality::store(model, state, &ws.w);
     }
     state.time += model.options.timestep;
 }
@@ -519,9 +597,59 @@ mod tests {
         b.compile().unwrap()
     }
 
+    /// Contacts of every model, a limit and a joint: a box with a limited slider on the floor.
+    fn contact_model() -> Model {
+        use crate::contact::ContactModel;
+        use crate::{GeomSpec, Shape};
+        let mut slide = JointSpec::new("slide", JointKind::Prismatic, "box", "puck")
+            .axis([1.0, 0.0, 0.0])
+            .anchors([0.0, 0.0, 0.1], [0.0; 3]);
+        slide.range = Some(vec![(-0.3, 0.4)]);
+        ModelBuilder::new()
+            .timestep(0.02)
+            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.7))
+            .body(BodySpec::new("box", 1.0, [0.1, 0.12, 0.15]).pos([0.0, 0.0, 0.1]))
+            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
+            .geom(
+                GeomSpec::new(
+                    "box",
+                    "box",
+                    Shape::Box {
+                        half_extents: Vector3::new(0.1, 0.1, 0.1),
+                    },
+                )
+                .friction(0.7),
+            )
+            .body(BodySpec::new("puck", 0.5, [0.01, 0.01, 0.01]).pos([0.0, 0.0, 0.2]))
+            .joint(slide)
+            .geom(
+                GeomSpec::new("p1", "puck", Shape::Sphere { radius: 0.05 })
+                    .pos([0.1, 0.0, -0.15])
+                    .model(Some(ContactModel::Linear)),
+            )
+            .geom(
+                GeomSpec::new("p2", "puck", Shape::Sphere { radius: 0.05 })
+                    .pos([-0.1, 0.0, -0.15])
+                    .model(Some(ContactModel::Impact)),
+            )
+            .compile()
+            .unwrap()
+    }
+
+    #[test]
+    fn newton_matrix_with_contacts_and_limits_matches_finite_differences() {
+        let model = contact_model();
+        assert!(model.topology.has_cones);
+        check_newton_matrix(&model, 0.3);
+    }
+
     #[test]
     fn newton_matrix_matches_finite_differences_of_the_residual() {
-        let model = model();
+        check_newton_matrix(&model(), 0.0);
+    }
+
+    fn check_newton_matrix(model: &Model, kappa: f64) {
+        let model = model.clone();
         let mut state = crate::State::reference(&model);
         let qpos = model.qpos0.clone();
         let qvel: Vec<f64> = (0..model.nv)
@@ -532,10 +660,14 @@ mod tests {
         prepare(&model, &state, &mut ws, &[], &AppliedForces::default());
         // move the iterate away from the state so every block is generic
         for (i, w) in ws.w.iter_mut().enumerate() {
+            // stay inside the cones: perturb, then keep positive
             *w += 0.3 * ((i as f64) * 1.3).cos();
+            if i >= model.topology.smooth_dim {
+                *w = w.abs() + 0.5;
+            }
         }
         let n = ws.w.len();
-        evaluate(&model, &state, &mut ws, false);
+        evaluate(&model, &state, &mut ws, false, kappa);
         assemble(&model, &mut ws);
         let base = ws.w.clone();
         let eps = 1e-6;
@@ -546,10 +678,10 @@ mod tests {
             ws.matrix.matvec(&model.topology.pattern, &x, &mut ax);
             ws.w_trial.copy_from_slice(&base);
             ws.w_trial[col] += eps;
-            evaluate(&model, &state, &mut ws, true);
+            evaluate(&model, &state, &mut ws, true, kappa);
             let rp = ws.residual.clone();
             ws.w_trial[col] -= 2.0 * eps;
-            evaluate(&model, &state, &mut ws, true);
+            evaluate(&model, &state, &mut ws, true, kappa);
             for row in 0..n {
                 let fd = (rp[row] - ws.residual[row]) / (2.0 * eps);
                 let reg = if row == col && row >= 6 * (model.nbody() - 1) {

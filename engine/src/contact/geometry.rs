@@ -1,0 +1,502 @@
+//! Narrow-phase collision geometry: a fixed list of point-like contact candidates per pair of
+//! collision shapes, and the evaluation of each candidate to a signed distance, two witness
+//! points and a normal.
+//!
+//! ## Fixed candidates
+//! The interior-point contact solver (Dojo-style NCP) needs the set of complementarity
+//! constraints to stay fixed while it iterates, so the contacts between two geoms are not found
+//! anew each step. Instead [`candidates`] decides once, when the model is compiled, a list of
+//! [`Feature`]s (which feature of A may touch which feature of B), and each step [`evaluate`]
+//! turns every candidate into a [`Witness`]: the signed distance φ (metres, negative =
+//! penetration), a point on each surface and the unit normal pointing from B towards A, with
+//! `point_a − point_b = φ · normal`. Several candidates may sit at the same place (a cylinder's
+//! lowest rim point may coincide with one of its fixed rim points); the solver handles
+//! duplicates.
+//!
+//! ## Envelope theorem
+//! Each candidate is a small distance problem: φ is the minimum over the candidate's feature
+//! pair of the distance between the two surfaces (or minus the penetration depth). Where its
+//! minimiser is locally unique, φ is a smooth function of the two poses, and by the envelope
+//! theorem its first variation under rigid motions of the bodies only needs the witnesses:
+//! `δφ = nᵀ δx_a(point_a) − nᵀ δx_b(point_b)`, where `δx(p) = δp + δθ × (p − o)` is the
+//! displacement of the material point at `p` of a body moving by `(δp, δθ)` about `o`. The
+//! solver relies on this, so every kernel returns the *exact* closest (or deepest) points of its
+//! feature, never an approximation, and ties (e.g. parallel segments, a point equidistant from
+//! two box faces) are broken deterministically.
+//!
+//! ## Candidate lists
+//! | pair | candidates |
+//! |---|---|
+//! | sphere / point – plane | 1: the centre, `φ = nᵀ(c − o) − r` |
+//! | capsule – plane | 2: the end spheres |
+//! | box – plane | 8: the corners |
+//! | cylinder – plane | 8: per end disk, its exact lowest rim point plus rim points at 0°, 120°, 240° |
+//! | ellipsoid – plane | 1: the exact support point, `φ = nᵀ(c − o) − ‖D Rᵀ n‖` |
+//! | sphere – sphere | 1 |
+//! | sphere – capsule | 1: closest point on the segment |
+//! | capsule – capsule | 3: segment–segment closest points, each end of A against B's segment |
+//! | sphere / point – box | 1: signed distance of the centre to the box, minus the radius |
+//! | capsule – box | 3: end spheres and the midpoint sphere against the box |
+//! | box – box | 16: each corner of A against B, each corner of B against A |
+//!
+//! A point is a sphere of radius 0. The plane is always B; in pairs of different kinds the
+//! "smaller" kind (sphere/point < capsule < box < cylinder < ellipsoid < plane) is A, and
+//! [`candidates`] reports when it had to exchange the two geoms.
+//!
+//! ## Limitations
+//! Cylinders and ellipsoids only collide with planes; plane–plane is unsupported. Capsule–box
+//! only tests three spheres on the segment, so a capsule crossing a box edge between them
+//! (e.g. a long capsule lying across a box) is not detected. Box–box only tests corners, so
+//! edge–edge contact (two boxes crossed edge on edge) is not detected. Capsule–capsule tests
+//! the ends of A only, so parallel capsules are supported at two points only where A's ends
+//! lie alongside B's segment.
+//!
+//! ## Degenerate configurations
+//! `evaluate` never panics and returns finite values for finite poses and shapes. Where the
+//! normal is undefined it picks a fixed direction: coincident sphere centres → +z of B; a
+//! sphere centre on a capsule's segment → +x of B; intersecting segments → `axis_a × axis_b`
+//! (or +x of B when they are also parallel); a point exactly at a box centre → the outward
+//! normal of the face with the smallest half-extent (+ side, lowest axis on ties); a cylinder
+//! axis parallel to the plane normal → the rim point along the disk's local +x.
+
+use nalgebra::{Matrix3, Vector3};
+
+#[path = "pairs/kernels.rs"]
+mod kernels;
+
+#[cfg(test)]
+#[path = "pairs/geometry_tests.rs"]
+mod tests;
+
+/// Collision shape in its geom frame (MuJoCo conventions).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Shape {
+    /// Infinite plane through the geom origin with normal +z of the geom frame (solid below).
+    Plane,
+    /// Sphere centred at the geom origin.
+    Sphere {
+        /// Radius (m).
+        radius: f64,
+    },
+    /// Segment along geom z from -half_length to +half_length, swept by a sphere of `radius`.
+    Capsule {
+        /// Radius of the swept sphere (m).
+        radius: f64,
+        /// Half the length of the segment (m).
+        half_length: f64,
+    },
+    /// Box centred at the geom origin, aligned with the geom axes.
+    Box {
+        /// Half the side lengths along geom x, y, z (m).
+        half_extents: Vector3<f64>,
+    },
+    /// Axis along geom z, total height 2·half_length.
+    Cylinder {
+        /// Radius of the end disks (m).
+        radius: f64,
+        /// Half the height (m).
+        half_length: f64,
+    },
+    /// Ellipsoid centred at the geom origin with semi-axes along the geom axes.
+    Ellipsoid {
+        /// Semi-axes along geom x, y, z (m).
+        radii: Vector3<f64>,
+    },
+    /// A point (a sphere of radius 0).
+    Point,
+}
+
+impl Shape {
+    /// Human-readable kind name, for error messages.
+    fn kind(&self) -> &'static str {
+        match self {
+            Shape::Plane => "plane",
+            Shape::Sphere { .. } => "sphere",
+            Shape::Capsule { .. } => "capsule",
+            Shape::Box { .. } => "box",
+            Shape::Cylinder { .. } => "cylinder",
+            Shape::Ellipsoid { .. } => "ellipsoid",
+            Shape::Point => "point",
+        }
+    }
+
+    /// Order of kinds: in a pair, the lower rank is A and the higher is B.
+    fn rank(&self) -> u8 {
+        match self {
+            Shape::Sphere { .. } | Shape::Point => 0,
+            Shape::Capsule { .. } => 1,
+            Shape::Box { .. } => 2,
+            Shape::Cylinder { .. } => 3,
+            Shape::Ellipsoid { .. } => 4,
+            Shape::Plane => 5,
+        }
+    }
+
+    /// Radius of a sphere-like shape (a point has radius 0), `None` for the other kinds.
+    fn ball_radius(&self) -> Option<f64> {
+        match *self {
+            Shape::Sphere { radius } => Some(radius),
+            Shape::Point => Some(0.0),
+            _ => None,
+        }
+    }
+
+    /// Checks that every dimension is finite and non-negative.
+    fn validate(&self) -> Result<(), String> {
+        let dims: Vec<f64> = match self {
+            Shape::Plane | Shape::Point => Vec::new(),
+            Shape::Sphere { radius } => vec![*radius],
+            Shape::Capsule {
+                radius,
+                half_length,
+            }
+            | Shape::Cylinder {
+                radius,
+                half_length,
+            } => {
+                vec![*radius, *half_length]
+            }
+            Shape::Box { half_extents: v } | Shape::Ellipsoid { radii: v } => {
+                v.iter().copied().collect()
+            }
+        };
+        if dims.iter().all(|d| d.is_finite() && *d >= 0.0) {
+            Ok(())
+        } else {
+            Err(format!(
+                "{} has a negative or non-finite dimension: {self:?}",
+                self.kind()
+            ))
+        }
+    }
+}
+
+/// World pose of a geom: position and rotation (geom frame -> world).
+#[derive(Clone, Copy, Debug)]
+pub struct GeomPose {
+    /// World position of the geom origin (m).
+    pub pos: Vector3<f64>,
+    /// Rotation matrix taking geom-frame vectors to world vectors.
+    pub rot: Matrix3<f64>,
+}
+
+impl GeomPose {
+    /// Pose from a position and a rotation matrix.
+    pub fn new(pos: Vector3<f64>, rot: Matrix3<f64>) -> Self {
+        Self { pos, rot }
+    }
+
+    /// World position of a point given in the geom frame.
+    pub fn transform_point(&self, local: &Vector3<f64>) -> Vector3<f64> {
+        self.pos + self.rot * local // x = p + R x_local
+    }
+}
+
+/// A sphere fixed in one body of a pair: a sphere of a sphere geom, an end of a capsule, or a
+/// point (radius 0) such as a box corner or a cylinder rim point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ball {
+    /// Centre in the geom frame of the body it belongs to.
+    pub center: Vector3<f64>,
+    /// Radius (m), 0 for a point.
+    pub radius: f64,
+}
+
+/// A capsule core: the segment along geom z from -half_length to +half_length, swept by a
+/// sphere of `radius`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Segment {
+    /// Half the length of the segment (m).
+    pub half_length: f64,
+    /// Radius of the swept sphere (m).
+    pub radius: f64,
+}
+
+/// One candidate of a pair: which feature of A touches which feature of B.
+///
+/// Every variant stores the dimensions it needs (copied by [`candidates`]); positions are in
+/// the geom frame of the body they belong to.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Feature {
+    /// A ball of A against plane B: `φ = nᵀ(c − o) − r`.
+    SpherePlane {
+        /// The ball of A.
+        a: Ball,
+    },
+    /// The lowest rim point of an end disk of cylinder A (disk normal = A's z) against plane B.
+    DiskPlane {
+        /// Disk centre in A's geom frame (on A's z axis).
+        center_a: Vector3<f64>,
+        /// Disk radius.
+        radius_a: f64,
+    },
+    /// The support point of ellipsoid A (centred at A's origin) against plane B.
+    EllipsoidPlane {
+        /// Semi-axes of A along its geom axes.
+        radii_a: Vector3<f64>,
+    },
+    /// A ball of A against a ball of B.
+    SphereSphere {
+        /// The ball of A.
+        a: Ball,
+        /// The ball of B.
+        b: Ball,
+    },
+    /// A ball of A against capsule B (closest point on B's segment).
+    SphereCapsule {
+        /// The ball of A.
+        a: Ball,
+        /// The capsule core of B.
+        b: Segment,
+    },
+    /// Closest points of the segments of capsules A and B.
+    CapsuleCapsule {
+        /// The capsule core of A.
+        a: Segment,
+        /// The capsule core of B.
+        b: Segment,
+    },
+    /// A ball of A against box B (centred at B's origin).
+    SphereBox {
+        /// The ball of A.
+        a: Ball,
+        /// Half extents of box B.
+        half_extents_b: Vector3<f64>,
+    },
+    /// Box A (centred at A's origin) against a ball of B.
+    BoxSphere {
+        /// Half extents of box A.
+        half_extents_a: Vector3<f64>,
+        /// The ball of B.
+        b: Ball,
+    },
+}
+
+/// Evaluated candidate.
+#[derive(Clone, Copy, Debug)]
+pub struct Witness {
+    /// Signed distance (m), negative when penetrating: `point_a − point_b = phi · normal`.
+    pub phi: f64,
+    /// Witness point on A's surface (world).
+    pub point_a: Vector3<f64>,
+    /// Witness point on B's surface (world).
+    pub point_b: Vector3<f64>,
+    /// Unit normal (world), pointing from B towards A.
+    pub normal: Vector3<f64>,
+}
+
+/// Candidates for shape A against shape B, or `Err(message)` if the pair is unsupported or a
+/// dimension is negative or not finite.
+///
+/// Returns `(features, swapped)`: when `swapped` is true the features are for the pair
+/// `(b, a)`, and the caller must call [`evaluate`] with the two geoms exchanged (the normal then
+/// points from the caller's A towards its B).
+pub fn candidates(a: &Shape, b: &Shape) -> Result<(Vec<Feature>, bool), String> {
+    a.validate()?;
+    b.validate()?;
+    let swapped = a.rank() > b.rank();
+    let (first, second) = if swapped { (b, a) } else { (a, b) };
+    let features = match second {
+        Shape::Plane => against_plane(first)?,
+        _ => between_solids(first, second)?,
+    };
+    Ok((features, swapped))
+}
+
+/// Evaluates one candidate: `shape_a` at `pose_a`, `shape_b` at `pose_b` (after the caller
+/// applied `swapped`).
+///
+/// The features store the dimensions they use, so the shapes are not read by the current
+/// features; they are part of the signature so that callers pass the pair as compiled.
+pub fn evaluate(
+    feature: &Feature,
+    shape_a: &Shape,
+    pose_a: &GeomPose,
+    shape_b: &Shape,
+    pose_b: &GeomPose,
+) -> Witness {
+    let _ = (shape_a, shape_b);
+    match feature {
+        Feature::SpherePlane { a } => kernels::sphere_plane(a, pose_a, pose_b),
+        Feature::DiskPlane { center_a, radius_a } => {
+            kernels::disk_plane(center_a, *radius_a, pose_a, pose_b)
+        }
+        Feature::EllipsoidPlane { radii_a } => kernels::ellipsoid_plane(radii_a, pose_a, pose_b),
+        Feature::SphereSphere { a, b } => kernels::sphere_sphere(a, pose_a, b, pose_b),
+        Feature::SphereCapsule { a, b } => kernels::sphere_capsule(a, pose_a, b, pose_b),
+        Feature::CapsuleCapsule { a, b } => kernels::capsule_capsule(a, pose_a, b, pose_b),
+        Feature::SphereBox { a, half_extents_b } => {
+            kernels::sphere_box(a, pose_a, half_extents_b, pose_b)
+        }
+        Feature::BoxSphere { half_extents_a, b } => {
+            kernels::box_sphere(half_extents_a, pose_a, b, pose_b)
+        }
+    }
+}
+
+/// Ball of the given centre and radius.
+fn ball(center: Vector3<f64>, radius: f64) -> Ball {
+    Ball { center, radius }
+}
+
+/// Candidates of shape A against plane B.
+fn against_plane(a: &Shape) -> Result<Vec<Feature>, String> {
+    let sphere = |center: Vector3<f64>, radius: f64| Feature::SpherePlane {
+        a: ball(center, radius),
+    };
+    Ok(match *a {
+        Shape::Sphere { radius } => vec![sphere(Vector3::zeros(), radius)],
+        Shape::Point => vec![sphere(Vector3::zeros(), 0.0)],
+        Shape::Capsule {
+            radius,
+            half_length,
+        } => capsule_ends(half_length)
+            .map(|c| sphere(c, radius))
+            .to_vec(),
+        Shape::Box { half_extents } => box_corners(&half_extents).map(|c| sphere(c, 0.0)).to_vec(),
+        Shape::Cylinder {
+            radius,
+            half_length,
+        } => cylinder_plane(radius, half_length),
+        Shape::Ellipsoid { radii } => vec![Feature::EllipsoidPlane { radii_a: radii }],
+        Shape::Plane => return Err("plane-plane collision is not supported".to_string()),
+    })
+}
+
+/// Cylinder against plane: per end disk, its lowest rim point and three fixed rim points.
+fn cylinder_plane(radius: f64, half_length: f64) -> Vec<Feature> {
+    let mut features = Vec::with_capacity(8);
+    for z in [-half_length, half_length] {
+        let center_a = Vector3::new(0.0, 0.0, z);
+        features.push(Feature::DiskPlane {
+            center_a,
+            radius_a: radius,
+        });
+        for k in 0..3 {
+            let angle = f64::from(k) * 2.0 * std::f64::consts::PI / 3.0; // 0°, 120°, 240°
+            let rim = Vector3::new(radius * angle.cos(), radius * angle.sin(), z);
+            features.push(Feature::SpherePlane { a: ball(rim, 0.0) });
+        }
+    }
+    features
+}
+
+/// Candidates between two non-plane shapes with `a.rank() <= b.rank()`.
+fn between_solids(a: &Shape, b: &Shape) -> Result<Vec<Feature>, String> {
+    let features = match (a.ball_radius(), a, b) {
+        (Some(radius), _, _) => ball_against(ball(Vector3::zeros(), radius), b),
+        (
+            None,
+            Shape::Capsule {
+                radius,
+                half_length,
+            },
+            _,
+        ) => capsule_against(
+            Segment {
+                half_length: *half_length,
+                radius: *radius,
+            },
+            b,
+        ),
+        (None, Shape::Box { half_extents: ha }, Shape::Box { half_extents: hb }) => {
+            Some(box_box(ha, hb))
+        }
+        _ => None,
+    };
+    features.ok_or_else(|| {
+        let (ka, kb) = (a.kind(), b.kind());
+        format!("collision between a {ka} and a {kb} is not supported (cylinders and ellipsoids collide only with planes)")
+    })
+}
+
+/// A sphere or point A against a sphere, point, capsule or box B.
+fn ball_against(a: Ball, b: &Shape) -> Option<Vec<Feature>> {
+    let feature = match *b {
+        Shape::Sphere { radius } => Feature::SphereSphere {
+            a,
+            b: ball(Vector3::zeros(), radius),
+        },
+        Shape::Point => Feature::SphereSphere {
+            a,
+            b: ball(Vector3::zeros(), 0.0),
+        },
+        Shape::Capsule {
+            radius,
+            half_length,
+        } => Feature::SphereCapsule {
+            a,
+            b: Segment {
+                half_length,
+                radius,
+            },
+        },
+        Shape::Box { half_extents } => Feature::SphereBox {
+            a,
+            half_extents_b: half_extents,
+        },
+        _ => return None,
+    };
+    Some(vec![feature])
+}
+
+/// Capsule A against capsule B (segments' closest points, then each end of A against B) or
+/// against box B (end spheres and the midpoint sphere).
+fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
+    let ends = capsule_ends(a.half_length).map(|c| ball(c, a.radius));
+    match *b {
+        Shape::Capsule {
+            radius,
+            half_length,
+        } => {
+            let b = Segment {
+                half_length,
+                radius,
+            };
+            let first = Feature::CapsuleCapsule { a, b };
+            let rest = ends.map(|end| Feature::SphereCapsule { a: end, b });
+            Some([first].into_iter().chain(rest).collect())
+        }
+        Shape::Box { half_extents } => {
+            let middle = ball(Vector3::zeros(), a.radius);
+            let balls = [ends[0], middle, ends[1]];
+            Some(
+                balls
+                    .map(|a| Feature::SphereBox {
+                        a,
+                        half_extents_b: half_extents,
+                    })
+                    .to_vec(),
+            )
+        }
+        _ => None,
+    }
+}
+
+/// Box against box: the corners of A against B, then the corners of B against A.
+fn box_box(half_a: &Vector3<f64>, half_b: &Vector3<f64>) -> Vec<Feature> {
+    let a_in_b = box_corners(half_a).map(|c| Feature::SphereBox {
+        a: ball(c, 0.0),
+        half_extents_b: *half_b,
+    });
+    let b_in_a = box_corners(half_b).map(|c| Feature::BoxSphere {
+        half_extents_a: *half_a,
+        b: ball(c, 0.0),
+    });
+    a_in_b.into_iter().chain(b_in_a).collect()
+}
+
+/// The two ends of a segment along z: `(0, 0, ∓half_length)`.
+fn capsule_ends(half_length: f64) -> [Vector3<f64>; 2] {
+    [
+        Vector3::new(0.0, 0.0, -half_length),
+        Vector3::new(0.0, 0.0, half_length),
+    ]
+}
+
+/// The eight corners of a box, bit k of the index selecting the sign of axis k.
+fn box_corners(half: &Vector3<f64>) -> [Vector3<f64>; 8] {
+    std::array::from_fn(|i| {
+        Vector3::from_fn(|k, _| if i >> k & 1 == 1 { half[k] } else { -half[k] })
+    })
+}

@@ -1,0 +1,181 @@
+//! Hard contact (Dojo §IV-A): collision geometry, contact candidates and their models.
+//!
+//! Each pair of geoms that may touch yields a fixed list of point candidates at compile time
+//! ([`geometry::candidates`]). A candidate is a node of the mechanism graph with its own
+//! interior-point variables, sized by its [`ContactModel`]:
+//!
+//! | model | variables | rows |
+//! |---|---|---|
+//! | `Impact` | γ, s | `s - φ(x⁺)`, `γ s - κ` |
+//! | `Nonlinear` | γ, s, ξ ∈ Q³, η ∈ Q³ | `s - φ`, `γ s - κ`, `ξ₁ - μγ`, `ξ ∘ η - κe`, `η₂:₃ - v_t` (eqs. 20-24) |
+//! | `Linear` | γ, s, ψ, s_ψ, β ∈ R⁴, η ∈ R⁴ | `s - φ`, `s_ψ - (μγ - Σβ)`, `η - (Dᵀv + ψ)`, complementarities (eqs. 5-10) |
+//!
+//! `φ` is evaluated at the next configuration; the contact impulse acts along the contact frame
+//! of the current configuration (like joint impulses), and `v_t` is the tangential velocity of
+//! the contact point at the next midpoint velocities. Impacts are perfectly inelastic (no
+//! restitution), as in the paper.
+pub mod cone;
+pub mod geometry;
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::joints::geometry::Pose;
+use crate::math::quat;
+use crate::math::spatial::basis_from_axis;
+use geometry::{Feature, GeomPose, Shape, Witness};
+
+/// How a contact pair resolves friction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ContactModel {
+    /// Exact Coulomb cone as a second-order cone program (default).
+    Nonlinear,
+    /// Pyramid with four directions (the LCP form).
+    Linear,
+    /// Frictionless impact only.
+    Impact,
+}
+
+impl ContactModel {
+    /// Interior-point variables of one candidate.
+    pub fn dim(self) -> usize {
+        match self {
+            ContactModel::Impact => 2,
+            ContactModel::Nonlinear => 8,
+            ContactModel::Linear => 12,
+        }
+    }
+    /// Name used in Python.
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactModel::Nonlinear => "nonlinear",
+            ContactModel::Linear => "linear",
+            ContactModel::Impact => "impact",
+        }
+    }
+    /// Parse a name.
+    pub fn from_name(name: &str) -> Option<ContactModel> {
+        match name {
+            "nonlinear" => Some(ContactModel::Nonlinear),
+            "linear" => Some(ContactModel::Linear),
+            "impact" => Some(ContactModel::Impact),
+            _ => None,
+        }
+    }
+    /// Number of (orthant pairs, second-order cones) of one candidate.
+    pub fn cones(self) -> (usize, usize) {
+        match self {
+            ContactModel::Impact => (1, 0),
+            ContactModel::Nonlinear => (1, 1),
+            ContactModel::Linear => (6, 0),
+        }
+    }
+}
+
+/// A compiled collision geometry attached to a body.
+#[derive(Clone, Debug)]
+pub struct Geom {
+    /// Unique name.
+    pub name: String,
+    /// Body index (0 = world).
+    pub body: usize,
+    /// Shape in the geom frame.
+    pub shape: Shape,
+    /// Geom frame origin in the body's COM frame (m).
+    pub pos: Vector3<f64>,
+    /// Geom frame orientation relative to the body frame.
+    pub rot: Matrix3<f64>,
+    /// Coulomb friction coefficient.
+    pub friction: f64,
+    /// Contact model, or `None` for a geom that never collides.
+    pub model: Option<ContactModel>,
+    /// Collision type bits (MuJoCo's `contype`).
+    pub contype: u32,
+    /// Collision affinity bits (MuJoCo's `conaffinity`).
+    pub conaffinity: u32,
+}
+
+impl Geom {
+    /// World pose of the geom given its body's COM pose.
+    pub fn world_pose(&self, body: &Pose) -> GeomPose {
+        let r = quat::rotation(&body.quat);
+        GeomPose {
+            pos: body.pos + r * self.pos,
+            rot: r * self.rot,
+        }
+    }
+}
+
+/// One contact candidate: a feature of geom `a` against geom `b`.
+#[derive(Clone, Debug)]
+pub struct Contact {
+    /// First geom (the normal points from `b` to `a`).
+    pub geom_a: usize,
+    /// Second geom.
+    pub geom_b: usize,
+    /// Which features touch.
+    pub feature: Feature,
+    /// Friction model of the pair.
+    pub model: ContactModel,
+    /// Friction coefficient of the pair (max of the two geoms, as MuJoCo).
+    pub friction: f64,
+}
+
+/// Contact frame at one configuration: world normal and tangents, witness arms, and the
+/// Jacobian of the contact-point relative velocity `[n t1 t2]ᵀ (v_a(w_a) - v_b(w_b))` with
+/// respect to `(v, ω_body)` of body a (columns 0..6) and body b (6..12).
+#[derive(Clone, Copy, Debug)]
+pub struct ContactFrame {
+    /// Signed distance (m).
+    pub phi: f64,
+    /// Rows n, t1, t2 of the 3 × 12 Jacobian.
+    pub jac: [[f64; 12]; 3],
+}
+
+impl ContactFrame {
+    /// From a witness and the two bodies' COM poses.
+    pub fn new(w: &Witness, body_a: &Pose, body_b: &Pose) -> Self {
+        let basis = basis_from_axis(&w.normal);
+        let (ra, rb) = (quat::rotation(&body_a.quat), quat::rotation(&body_b.quat));
+        let (arm_a, arm_b) = (w.point_a - body_a.pos, w.point_b - body_b.pos);
+        let mut jac = [[0.0; 12]; 3];
+        for (k, row) in jac.iter_mut().enumerate() {
+            let d: Vector3<f64> = basis.column(k).into_owned();
+            // d · (v + R ω_b × r) = dᵀ v + (Rᵀ (r × d))ᵀ ω_b
+            let (ja, jb) = (
+                ra.transpose() * arm_a.cross(&d),
+                rb.transpose() * arm_b.cross(&d),
+            );
+            for i in 0..3 {
+                row[i] = d[i];
+                row[3 + i] = ja[i];
+                row[6 + i] = -d[i];
+                row[9 + i] = -jb[i];
+            }
+        }
+        ContactFrame { phi: w.phi, jac }
+    }
+}
+
+/// Evaluate candidate `c` of `geoms` at the given body poses (`pose(b)` for body `b`).
+pub fn witness(c: &Contact, geoms: &[Geom], pose: impl Fn(usize) -> Pose) -> (Witness, Pose, Pose) {
+    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
+    let (pa, pb) = (pose(ga.body), pose(gb.body));
+    let w = geometry::evaluate(
+        &c.feature,
+        &ga.shape,
+        &ga.world_pose(&pa),
+        &gb.shape,
+        &gb.world_pose(&pb),
+    );
+    (w, pa, pb)
+}
+
+/// Signed distance of every contact candidate at `state` (m, negative = penetration).
+pub fn signed_distances(model: &crate::Model, state: &crate::State) -> Vec<f64> {
+    let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
+    model
+        .contacts
+        .iter()
+        .map(|c| witness(c, &model.geoms, pose).0.phi)
+        .collect()
+}

@@ -1,0 +1,173 @@
+//! Property tests of the narrow phase on random shapes and poses, for every supported pair:
+//! the witness invariants, the envelope-theorem derivative of φ under rigid motions of either
+//! body (checked against central finite differences), and argument swapping.
+
+use super::*;
+use proptest::prelude::*;
+
+/// Shape kinds in the property tests: 0 sphere, 1 point, 2 capsule, 3 box, 4 cylinder,
+/// 5 ellipsoid, 6 plane.
+fn make_shape(kind: usize, d: [f64; 3]) -> Shape {
+    match kind {
+        0 => Shape::Sphere { radius: d[0] },
+        1 => Shape::Point,
+        2 => Shape::Capsule {
+            radius: d[0],
+            half_length: d[1],
+        },
+        3 => Shape::Box {
+            half_extents: Vector3::from(d),
+        },
+        4 => Shape::Cylinder {
+            radius: d[0],
+            half_length: d[1],
+        },
+        5 => Shape::Ellipsoid {
+            radii: Vector3::from(d),
+        },
+        _ => Shape::Plane,
+    }
+}
+
+fn dims() -> impl Strategy<Value = [f64; 3]> {
+    prop::array::uniform3(0.1..0.8f64)
+}
+
+fn rand_pose() -> impl Strategy<Value = GeomPose> {
+    (
+        prop::array::uniform3(-1.0..1.0f64),
+        prop::array::uniform3(-3.0..3.0f64),
+    )
+        .prop_map(|(p, r)| pose(p, r))
+}
+
+/// Every supported ordered pair of kinds.
+fn supported_pair() -> impl Strategy<Value = (usize, usize)> {
+    (0..7usize, 0..7usize).prop_filter("supported", |&(a, b)| {
+        candidates(&make_shape(a, [0.5; 3]), &make_shape(b, [0.5; 3])).is_ok()
+    })
+}
+
+/// Rigid motion of a pose: translation `dp` and rotation `dth` about its origin (world).
+fn moved(p: &GeomPose, dp: &Vector3<f64>, dth: &Vector3<f64>) -> GeomPose {
+    GeomPose::new(p.pos + dp, Rotation3::new(*dth).matrix() * p.rot)
+}
+
+/// Whether the feature's witness is locally unique with a margin (no ties, no kinks).
+fn unique_witness(f: &Feature, w: &Witness, pa: &GeomPose, pb: &GeomPose) -> bool {
+    let margin = 1e-2;
+    match f {
+        Feature::SpherePlane { .. } | Feature::EllipsoidPlane { .. } => true,
+        Feature::DiskPlane { .. } => pa.rot.column(2).dot(&pb.rot.column(2)).abs() < 1.0 - margin,
+        Feature::SphereSphere { a, b } => w.phi + a.radius + b.radius > margin,
+        Feature::SphereCapsule { a, b } => w.phi + a.radius + b.radius > margin,
+        Feature::CapsuleCapsule { a, b } => {
+            let sine = pa.rot.column(2).cross(&pb.rot.column(2)).norm();
+            w.phi + a.radius + b.radius > margin && sine > 0.1
+        }
+        Feature::SphereBox { a, half_extents_b } => {
+            box_unique(&pa.transform_point(&a.center), half_extents_b, pb)
+        }
+        Feature::BoxSphere { half_extents_a, b } => {
+            box_unique(&pb.transform_point(&b.center), half_extents_a, pa)
+        }
+    }
+}
+
+/// A point inside a box has a unique nearest face (outside the witness is always unique).
+fn box_unique(point: &Vector3<f64>, half: &Vector3<f64>, pose_box: &GeomPose) -> bool {
+    let q = pose_box.rot.transpose() * (point - pose_box.pos);
+    let mut depths: Vec<f64> = (0..3).map(|k| half[k] - q[k].abs()).collect();
+    if depths.iter().any(|d| *d < 0.0) {
+        return true;
+    }
+    depths.sort_by(f64::total_cmp);
+    depths[1] - depths[0] > 1e-2
+}
+
+/// Central finite differences of φ under the 12 unit rigid motions against the envelope
+/// theorem: `dφ = nᵀ(δp + δθ × (point_a − pos_a))` for A, the negative for B.
+fn check_derivative(f: &Feature, sa: &Shape, pa: &GeomPose, sb: &Shape, pb: &GeomPose) {
+    let w = evaluate(f, sa, pa, sb, pb);
+    let eps = 1e-6;
+    for (body, sign) in [(0, 1.0), (1, -1.0)] {
+        let (p, witness) = if body == 0 {
+            (pa, w.point_a)
+        } else {
+            (pb, w.point_b)
+        };
+        for k in 0..6 {
+            let unit = Vector3::ith(k % 3, 1.0);
+            let (dp, dth) = if k < 3 {
+                (unit, Vector3::zeros())
+            } else {
+                (Vector3::zeros(), unit)
+            };
+            let phi = |h: f64| {
+                let q = moved(p, &(h * dp), &(h * dth));
+                let (qa, qb) = if body == 0 { (q, *pb) } else { (*pa, q) };
+                evaluate(f, sa, &qa, sb, &qb).phi
+            };
+            let fd = (phi(eps) - phi(-eps)) / (2.0 * eps);
+            let analytic = sign * w.normal.dot(&(dp + dth.cross(&(witness - p.pos))));
+            assert!(
+                (fd - analytic).abs() <= 1e-6 * (1.0 + analytic.abs()),
+                "{f:?} body {body} dir {k}: fd {fd} vs {analytic}, {w:?}"
+            );
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn witnesses_are_consistent((ka, kb) in supported_pair(), da in dims(), db in dims(), pa in rand_pose(), pb in rand_pose(), target in -0.1..0.3f64) {
+        let (a, b) = (make_shape(ka, da), make_shape(kb, db));
+        let (features, swapped) = candidates(&a, &b).unwrap();
+        let ((sa, pa), (sb, pb)) = if swapped { ((&b, pb), (&a, pa)) } else { ((&a, pa), (&b, pb)) };
+        for f in &features {
+            let w = evaluate(f, sa, &pa, sb, &pb);
+            check_invariants(&w);
+            // Move A along the normal so that this candidate is near `target` (both signs).
+            let shifted = moved(&pa, &((target - w.phi) * w.normal), &Vector3::zeros());
+            check_invariants(&evaluate(f, sa, &shifted, sb, &pb));
+        }
+    }
+
+    #[test]
+    fn phi_derivative_follows_envelope_theorem((ka, kb) in supported_pair(), da in dims(), db in dims(), pa in rand_pose(), pb in rand_pose(), target in -0.05..0.2f64) {
+        let (a, b) = (make_shape(ka, da), make_shape(kb, db));
+        let (features, swapped) = candidates(&a, &b).unwrap();
+        let ((sa, pa), (sb, pb)) = if swapped { ((&b, pb), (&a, pa)) } else { ((&a, pa), (&b, pb)) };
+        for f in &features {
+            let w = evaluate(f, sa, &pa, sb, &pb);
+            let shifted = moved(&pa, &((target - w.phi) * w.normal), &Vector3::zeros());
+            for pose_a in [pa, shifted] {
+                let w = evaluate(f, sa, &pose_a, sb, &pb);
+                if unique_witness(f, &w, &pose_a, &pb) {
+                    check_derivative(f, sa, &pose_a, sb, &pb);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn swapping_arguments_gives_the_same_contacts((ka, kb) in supported_pair(), da in dims(), db in dims(), pa in rand_pose(), pb in rand_pose()) {
+        let (a, b) = (make_shape(ka, da), make_shape(kb, db));
+        let (fab, sab) = candidates(&a, &b).unwrap();
+        let (fba, sba) = candidates(&b, &a).unwrap();
+        let (ab, ba) = (eval_pair(&a, &pa, &b, &pb), eval_pair(&b, &pb, &a, &pa));
+        if a.rank() == b.rank() {
+            prop_assert!(!sab && !sba);
+            let min = |ws: &[Witness]| ws.iter().map(|w| w.phi).fold(f64::INFINITY, f64::min);
+            prop_assert!((min(&ab) - min(&ba)).abs() < 1e-12);
+            if ka == 3 {
+                prop_assert!(sorted(phis(&ab)).iter().zip(sorted(phis(&ba))).all(|(x, y)| (x - y).abs() < 1e-12));
+            }
+        } else {
+            prop_assert!(sab != sba && fab == fba);
+            prop_assert_eq!(phis(&ab), phis(&ba));
+        }
+    }
+}

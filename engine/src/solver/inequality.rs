@@ -1,0 +1,532 @@
+//! Inequality nodes of the step: contact candidates and joint limits (Dojo §IV-A, eq. 26).
+//!
+//! Residual rows, Jacobian blocks, complementarity bookkeeping and the cone line search for the
+//! interior-point solve. Node-local variable layouts:
+//!
+//! ```text
+//! impact     [γ, s]
+//! nonlinear  [γ, s, ξ₁, ξ₂, ξ₃, η₁, η₂, η₃]
+//! linear     [γ, s, ψ, s_ψ, β₁..β₄, η₁..η₄]          (β along +t1, -t1, +t2, -t2)
+//! limit dof  [γ_lo, s_lo, γ_hi, s_hi]                   (4 per limited dof)
+//! ```
+use nalgebra::{Matrix3, Vector3};
+
+use crate::contact::cone::{orthant_step, soc_product, soc_step};
+use crate::contact::{ContactFrame, ContactModel, witness};
+use crate::joints::geometry::{JointFrame, Pose};
+use crate::model::Model;
+use crate::model::topology_body_node as body_node;
+use crate::state::{State, Workspace};
+
+/// Orthant pairs `(primal, dual, complementarity row)` of a model's node, node-local indices.
+fn orthant_pairs(model: ContactModel) -> &'static [(usize, usize, usize)] {
+    match model {
+        ContactModel::Impact => &[(0, 1, 1)],
+        ContactModel::Nonlinear => &[(0, 1, 1)],
+        ContactModel::Linear => &[
+            (0, 1, 6),
+            (2, 3, 7),
+            (4, 8, 8),
+            (5, 9, 9),
+            (6, 10, 10),
+            (7, 11, 11),
+        ],
+    }
+}
+
+/// Node-local index of each limit pair: `(primal, dual, row)`.
+const LIMIT_PAIRS: [(usize, usize, usize); 2] = [(0, 1, 1), (2, 3, 3)];
+
+/// Second-order cone `(ξ start, η start, first row)` of a nonlinear contact node.
+const SOC: (usize, usize, usize) = (2, 5, 3);
+
+/// Visit every complementarity pair of the step: `f(offset, primal, dual, row, is_soc)` with
+/// node-local indices relative to the node offset.
+fn for_each_pair(model: &Model, mut f: impl FnMut(usize, usize, usize, usize, bool)) {
+    let t = &model.topology;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let o = t.pattern.offset(t.contact_node[c]);
+        for &(p, d, r) in orthant_pairs(contact.model) {
+            f(o, p, d, r, false);
+        }
+        if contact.model == ContactModel::Nonlinear {
+            f(o, SOC.0, SOC.1, SOC.2, true);
+        }
+    }
+    for (j, joint) in model.joints.iter().enumerate() {
+        if let Some(n) = t.limit_node[j] {
+            let o = t.pattern.offset(n);
+            for i in 0..joint.limits.len() {
+                for &(p, d, r) in &LIMIT_PAIRS {
+                    f(o + 4 * i, p, d, r, false);
+                }
+            }
+        }
+    }
+}
+
+fn v3(x: &[f64], i: usize) -> Vector3<f64> {
+    Vector3::new(x[i], x[i + 1], x[i + 2])
+}
+
+/// Cold start: the neutral point (γ = s = 1, ξ = η = e). Warm start: the previous step's values
+/// (stored in `state`) pushed at least `margin` inside their cones.
+pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm: bool) {
+    let t = &model.topology;
+    let mut k = 0;
+    let nodes = t.contact_node.iter().map(|&n| (n, t.pattern.dim(n))).chain(
+        t.limit_node
+            .iter()
+            .flatten()
+            .map(|&n| (n, t.pattern.dim(n))),
+    );
+    for (n, dim) in nodes {
+        let o = t.pattern.offset(n);
+        let prev = &state.ineq_vars[k..k + dim];
+        ws.w[o..o + dim].copy_from_slice(prev);
+        k += dim;
+    }
+    let margin = model.options.warm_start_margin;
+    let w = &mut ws.w;
+    for_each_pair(model, |o, p, d, _, soc| {
+        if soc {
+            for start in [o + p, o + d] {
+                let mut y = v3(w, start);
+                if !warm || !y.iter().all(|v| v.is_finite()) {
+                    y = Vector3::new(1.0, 0.0, 0.0);
+                }
+                crate::contact::cone::soc_interior(&mut y, margin);
+                w[start..start + 3].copy_from_slice(y.as_slice());
+            }
+        } else {
+            for i in [o + p, o + d] {
+                w[i] = if warm && w[i].is_finite() {
+                    w[i].max(margin)
+                } else {
+                    1.0
+                };
+            }
+        }
+    });
+    // other node entries (the ψ-slack pairs are covered above; nothing else is free)
+}
+
+/// Contact frames at the current configuration (impulse directions, tangential velocity map).
+pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
+    let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let (w, pa, pb) = witness(contact, &model.geoms, pose);
+        ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);
+    }
+}
+
+/// Add the inequality rows at the iterate `w` (with `ws.next_pose` set) and their impulses on
+/// the body rows. Complementarity rows hold `b ∘ c - κ e`. Returns (equality ∞-norm of these
+/// nodes, max |b ∘ c|).
+pub(crate) fn evaluate(
+    model: &Model,
+    ws: &mut Workspace,
+    w: &[f64],
+    residual: &mut [f64],
+    kappa: f64,
+) -> (f64, f64) {
+    let t = &model.topology;
+    let next = |ws: &Workspace, b: usize| {
+        if b == 0 {
+            Pose::world()
+        } else {
+            ws.next_pose[b]
+        }
+    };
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let [a, b] = t.contact_bodies[c];
+        let (wit, pa, pb) = witness(contact, &model.geoms, |x| {
+            if x == a {
+                next(ws, a)
+            } else if x == b {
+                next(ws, b)
+            } else {
+                Pose::world()
+            }
+        });
+        let frame = ContactFrame::new(&wit, &pa, &pb);
+        ws.contact_phi[c] = wit.phi;
+        ws.contact_dphi[c] = frame.jac[0];
+        contact_rows(model, ws, c, w, residual);
+    }
+    for (j, joint) in model.joints.iter().enumerate() {
+        let Some(n) = t.limit_node[j] else { continue };
+        let frame = JointFrame::new(joint, &next(ws, joint.parent), &next(ws, joint.child));
+        let mut q = [0.0; 7];
+        frame.coordinates(joint, &mut q[..joint.nq()]);
+        let mut jf = [0.0; 6 * 12];
+        frame.free_jacobian(joint, &mut jf[..12 * joint.nfree()]);
+        let (o, la) = (t.pattern.offset(n), ws.limit_adr[j]);
+        for (i, &(dof, lo, hi)) in joint.limits.iter().enumerate() {
+            let theta = q[dof]; // limits exist only on scalar coordinates (qpos index = dof)
+            ws.limit_dtheta[la + i].copy_from_slice(&jf[12 * dof..12 * dof + 12]);
+            let x = &w[o + 4 * i..o + 4 * i + 4];
+            let r = &mut residual[o + 4 * i..o + 4 * i + 4];
+            r[0] = x[1] - (theta - lo);
+            r[1] = x[0] * x[1] - kappa;
+            r[2] = x[3] - (hi - theta);
+            r[3] = x[2] * x[3] - kappa;
+            // generalized limit impulse γ_lo - γ_hi on the dof, through J_f at the current configuration
+            let imp = x[0] - x[2];
+            let fa = ws.free_adr[j] + 12 * dof;
+            for (side, body) in [(0, joint.parent), (1, joint.child)] {
+                if let Some(bn) = body_node(body) {
+                    let ob = t.pattern.offset(bn);
+                    for k in 0..6 {
+                        residual[ob + k] -= ws.free_jac[fa + 6 * side + k] * imp;
+                    }
+                }
+            }
+        }
+    }
+    violations(model, residual, kappa)
+}
+
+/// Residual rows of contact `c` and its impulse on the bodies.
+fn contact_rows(model: &Model, ws: &Workspace, c: usize, w: &[f64], residual: &mut [f64]) {
+    let t = &model.topology;
+    let contact = &model.contacts[c];
+    let o = t.pattern.offset(t.contact_node[c]);
+    let x = &w[o..o + contact.model.dim()];
+    let (mu, phi) = (contact.friction, ws.contact_phi[c]);
+    let now = &ws.contact_now[c].jac;
+    // relative tangential velocity of the contact point at the next midpoint velocities
+    let vt = |k: usize| -> f64 {
+        let [a, b] = t.contact_bodies[c];
+        let mut v = 0.0;
+        for (side, body) in [(0, a), (1, b)] {
+            if let Some(bn) = body_node(body) {
+                let ob = t.pattern.offset(bn);
+                v += (0..6)
+                    .map(|i| now[k][6 * side + i] * w[ob + i])
+                    .sum::<f64>();
+            }
+        }
+        v
+    };
+    let r = &mut residual[o..o + contact.model.dim()];
+    let force: [f64; 3] = match contact.model {
+        ContactModel::Impact => {
+            r[0] = x[1] - phi;
+            r[1] = x[0] * x[1];
+            [x[0], 0.0, 0.0]
+        }
+        ContactModel::Nonlinear => {
+            let (xi, eta) = (v3(x, 2), v3(x, 5));
+            r[0] = x[1] - phi;
+            r[1] = x[0] * x[1];
+            r[2] = xi[0] - mu * x[0];
+            r[3..6].copy_from_slice(soc_product(&xi, &eta).as_slice());
+            r[6] = eta[1] - vt(1);
+            r[7] = eta[2] - vt(2);
+            [x[0], xi[1], xi[2]]
+        }
+        ContactModel::Linear => {
+            let beta = &x[4..8];
+            let (v1, v2) = (vt(1), vt(2));
+            r[0] = x[1] - phi;
+            r[1] = x[3] - (mu * x[0] - beta.iter().sum::<f64>());
+            for (i, d) in [v1, -v1, v2, -v2].iter().enumerate() {
+                r[2 + i] = x[8 + i] - (d + x[2]);
+            }
+            r[6] = x[0] * x[1];
+            r[7] = x[2] * x[3];
+            for i in 0..4 {
+                r[8 + i] = x[4 + i] * x[8 + i];
+            }
+            [x[0], beta[0] - beta[1], beta[2] - beta[3]]
+        }
+    };
+    // body rows: -J_cᵀ f
+    let [a, b] = t.contact_bodies[c];
+    for (side, body) in [(0, a), (1, b)] {
+        if let Some(bn) = body_node(body) {
+            let ob = t.pattern.offset(bn);
+            for k in 0..6 {
+                residual[ob + k] -= (0..3).map(|d| now[d][6 * side + k] * force[d]).sum::<f64>();
+            }
+        }
+    }
+}
+
+/// Subtract κ from the complementarity rows' identity components; return (equality ∞-norm of the
+/// inequality nodes, max |b ∘ c| before the shift).
+fn violations(model: &Model, residual: &mut [f64], kappa: f64) -> (f64, f64) {
+    let t = &model.topology;
+    let mut kvio: f64 = 0.0;
+    let mut is_comp = |o: usize, row: usize, soc: bool, residual: &mut [f64]| {
+        let n = if soc { 3 } else { 1 };
+        for i in 0..n {
+            let v = residual[o + row + i];
+            kvio = if v.is_nan() || kvio.is_nan() {
+                f64::NAN
+            } else {
+                kvio.max(v.abs())
+            };
+        }
+        residual[o + row] -= kappa;
+    };
+    for_each_pair(model, |o, _, _, row, soc| is_comp(o, row, soc, residual));
+    // equality rows = all node rows that are not complementarity rows
+    let mut rvio: f64 = 0.0;
+    let eq = |o: usize, rows: &[usize], residual: &[f64], rvio: &mut f64| {
+        for &r in rows {
+            let v = residual[o + r];
+            *rvio = if v.is_nan() || rvio.is_nan() {
+                f64::NAN
+            } else {
+                rvio.max(v.abs())
+            };
+        }
+    };
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let o = t.pattern.offset(t.contact_node[c]);
+        let rows: &[usize] = match contact.model {
+            ContactModel::Impact => &[0],
+            ContactModel::Nonlinear => &[0, 2, 6, 7],
+            ContactModel::Linear => &[0, 1, 2, 3, 4, 5],
+        };
+        eq(o, rows, residual, &mut rvio);
+    }
+    for (j, joint) in model.joints.iter().enumerate() {
+        if let Some(n) = t.limit_node[j] {
+            let o = t.pattern.offset(n);
+            for i in 0..joint.limits.len() {
+                eq(o + 4 * i, &[0, 2], residual, &mut rvio);
+            }
+        }
+    }
+    (rvio, kvio)
+}
+
+/// Newton-matrix blocks of the inequality nodes at the iterate `w`.
+pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
+    let t = &model.topology;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let n = t.contact_node[c];
+        let (o, dim) = (t.pattern.offset(n), contact.model.dim());
+        let diag = t.pattern.block(n, n).unwrap_or(0);
+        contact_diag(
+            contact.model,
+            contact.friction,
+            &w[o..o + dim],
+            &mut ws.matrix.values[diag..diag + dim * dim],
+        );
+        let [a, b] = t.contact_bodies[c];
+        for (side, body) in [(0, a), (1, b)] {
+            let Some((row_n, row_b)) = t.contact_blocks[c][side] else {
+                continue;
+            };
+            let dphi = ws.contact_dphi[c];
+            let chain = chain_row(&dphi[6 * side..6 * side + 6], h, &ws.dphi[body]);
+            let now = ws.contact_now[c].jac;
+            let vals = &mut ws.matrix.values;
+            // node rows × body cols
+            let phi_row = 0;
+            for k in 0..6 {
+                vals[row_n + 6 * phi_row + k] = -chain[k];
+            }
+            let tangential: &[(usize, usize, f64)] = match contact.model {
+                ContactModel::Impact => &[],
+                ContactModel::Nonlinear => &[(6, 1, 1.0), (7, 2, 1.0)],
+                ContactModel::Linear => &[(2, 1, 1.0), (3, 1, -1.0), (4, 2, 1.0), (5, 2, -1.0)],
+            };
+            for &(row, dir, sign) in tangential {
+                for k in 0..6 {
+                    vals[row_n + 6 * row + k] = -sign * now[dir][6 * side + k];
+                }
+            }
+            // body rows × node cols: -J_cᵀ on the force variables
+            let forces: &[(usize, usize, f64)] = match contact.model {
+                ContactModel::Impact => &[(0, 0, 1.0)],
+                ContactModel::Nonlinear => &[(0, 0, 1.0), (3, 1, 1.0), (4, 2, 1.0)],
+                ContactModel::Linear => &[
+                    (0, 0, 1.0),
+                    (4, 1, 1.0),
+                    (5, 1, -1.0),
+                    (6, 2, 1.0),
+                    (7, 2, -1.0),
+                ],
+            };
+            for &(col, dir, sign) in forces {
+                for k in 0..6 {
+                    vals[row_b + dim * k + col] = -sign * now[dir][6 * side + k];
+                }
+            }
+        }
+    }
+    assemble_limits(model, ws, w, h);
+}
+
+/// `∂(row · δx⁺)/∂w` for one body: `[h row_p, row_φ · ∂φ/∂ω]`.
+fn chain_row(row: &[f64], h: f64, dphi: &Matrix3<f64>) -> [f64; 6] {
+    let mut out = [0.0; 6];
+    for i in 0..3 {
+        out[i] = h * row[i];
+        out[3 + i] = (0..3).map(|k| row[3 + k] * dphi[(k, i)]).sum();
+    }
+    out
+}
+
+/// Diagonal block of a contact node (row-major `dim × dim`), derivatives of its rows w.r.t. its
+/// own variables.
+fn contact_diag(model: ContactModel, mu: f64, x: &[f64], d: &mut [f64]) {
+    let dim = model.dim();
+    d.fill(0.0);
+    let mut set = |r: usize, c: usize, v: f64| d[r * dim + c] = v;
+    set(0, 1, 1.0); // s - φ
+    match model {
+        ContactModel::Impact => {
+            set(1, 0, x[1]);
+            set(1, 1, x[0]);
+        }
+        ContactModel::Nonlinear => {
+            set(1, 0, x[1]);
+            set(1, 1, x[0]);
+            set(2, 2, 1.0);
+            set(2, 0, -mu);
+            // ξ ∘ η: row 3 = ξᵀη; rows 4,5 = ξ₁ η₂:₃ + η₁ ξ₂:₃
+            for i in 0..3 {
+                set(3, 2 + i, x[5 + i]);
+                set(3, 5 + i, x[2 + i]);
+            }
+            for i in 0..2 {
+                set(4 + i, 2, x[6 + i]);
+                set(4 + i, 3 + i, x[5]);
+                set(4 + i, 5, x[3 + i]);
+                set(4 + i, 6 + i, x[2]);
+                set(6 + i, 6 + i, 1.0);
+            }
+        }
+        ContactModel::Linear => {
+            set(1, 3, 1.0);
+            set(1, 0, -mu);
+            for i in 0..4 {
+                set(1, 4 + i, 1.0);
+                set(2 + i, 8 + i, 1.0);
+                set(2 + i, 2, -1.0);
+            }
+            for (p, q, r) in [
+                (0, 1, 6),
+                (2, 3, 7),
+                (4, 8, 8),
+                (5, 9, 9),
+                (6, 10, 10),
+                (7, 11, 11),
+            ] {
+                set(r, p, x[q]);
+                set(r, q, x[p]);
+            }
+        }
+    }
+}
+
+fn assemble_limits(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
+    let t = &model.topology;
+    for (j, joint) in model.joints.iter().enumerate() {
+        let Some(n) = t.limit_node[j] else { continue };
+        let (o, dim) = (t.pattern.offset(n), 4 * joint.limits.len());
+        let diag = t.pattern.block(n, n).unwrap_or(0);
+        let d = &mut ws.matrix.values[diag..diag + dim * dim];
+        d.fill(0.0);
+        for i in 0..joint.limits.len() {
+            let b = 4 * i;
+            let x = &w[o + b..o + b + 4];
+            d[b * dim + b + 1] = 1.0; // s_lo
+            d[(b + 1) * dim + b] = x[1];
+            d[(b + 1) * dim + b + 1] = x[0];
+            d[(b + 2) * dim + b + 3] = 1.0; // s_hi
+            d[(b + 3) * dim + b + 2] = x[3];
+            d[(b + 3) * dim + b + 3] = x[2];
+        }
+        for (side, body) in [(0, joint.parent), (1, joint.child)] {
+            let Some((row_n, row_b)) = t.limit_blocks[j][side] else {
+                continue;
+            };
+            for (i, &(dof, _, _)) in joint.limits.iter().enumerate() {
+                let dtheta = ws.limit_dtheta[ws.limit_adr[j] + i];
+                let chain = chain_row(&dtheta[6 * side..6 * side + 6], h, &ws.dphi[body]);
+                let fa = ws.free_adr[j] + 12 * dof + 6 * side;
+                let vals = &mut ws.matrix.values;
+                for k in 0..6 {
+                    vals[row_n + 6 * (4 * i) + k] = -chain[k]; // s_lo - (θ - lo)
+                    vals[row_n + 6 * (4 * i + 2) + k] = chain[k]; // s_hi - (hi - θ)
+                    vals[row_b + dim * k + 4 * i] = -ws.free_jac[fa + k]; // -J_fᵀ γ_lo
+                    vals[row_b + dim * k + 4 * i + 2] = ws.free_jac[fa + k]; // +J_fᵀ γ_hi
+                }
+            }
+        }
+    }
+}
+
+/// Largest step keeping every cone variable inside its cone with fractions `τ_ort`, `τ_soc`
+/// (Algorithm 1).
+pub(crate) fn cone_search(
+    model: &Model,
+    w: &[f64],
+    delta: &[f64],
+    tau_ort: f64,
+    tau_soc: f64,
+) -> f64 {
+    let mut alpha: f64 = 1.0;
+    for_each_pair(model, |o, p, d, _, soc| {
+        if soc {
+            for s in [o + p, o + d] {
+                alpha = alpha.min(soc_step(&v3(w, s), &v3(delta, s), tau_soc));
+            }
+        } else {
+            alpha = alpha.min(orthant_step(
+                &[w[o + p], w[o + d]],
+                &[delta[o + p], delta[o + d]],
+                tau_ort,
+            ));
+        }
+    });
+    alpha
+}
+
+/// Mean complementarity `μ = Σ bᵀc / deg(K)` at `w + α Δ` (eqs. 52-53).
+pub(crate) fn mean_complementarity(model: &Model, w: &[f64], delta: &[f64], alpha: f64) -> f64 {
+    let mut sum = 0.0;
+    let at = |i: usize| w[i] + alpha * delta[i];
+    for_each_pair(model, |o, p, d, _, soc| {
+        let n = if soc { 3 } else { 1 };
+        sum += (0..n).map(|i| at(o + p + i) * at(o + d + i)).sum::<f64>();
+    });
+    sum / model.topology.cone_degree.max(1) as f64
+}
+
+/// Mehrotra's second-order term: add `Δb_aff ∘ Δc_aff` to the complementarity rows.
+pub(crate) fn add_mehrotra_correction(model: &Model, delta_aff: &[f64], residual: &mut [f64]) {
+    for_each_pair(model, |o, p, d, row, soc| {
+        if soc {
+            let c = soc_product(&v3(delta_aff, o + p), &v3(delta_aff, o + d));
+            for i in 0..3 {
+                residual[o + row + i] += c[i];
+            }
+        } else {
+            residual[o + row] += delta_aff[o + p] * delta_aff[o + d];
+        }
+    });
+}
+
+/// Copy the inequality variables of the solved iterate into the state (warm start and output).
+pub(crate) fn store(model: &Model, state: &mut State, w: &[f64]) {
+    let t = &model.topology;
+    let mut k = 0;
+    let nodes = t
+        .contact_node
+        .iter()
+        .copied()
+        .chain(t.limit_node.iter().flatten().copied());
+    for n in nodes {
+        let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
+        state.ineq_vars[k..k + dim].copy_from_slice(&w[o..o + dim]);
+        k += dim;
+    }
+}

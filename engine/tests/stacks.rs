@@ -1,0 +1,95 @@
+//! Stacks: five boxes stand for 2000 steps; 10:1 and 1000:1 mass ratios stay stable; μ = 2 and
+//! μ = 0 both work.
+#[path = "contact_common.rs"]
+mod common;
+use common::*;
+use nalgebra::Vector3;
+use ukemi_engine::{ContactModel, ModelBuilder, Shape, State};
+
+fn stack(masses: &[f64], mu: f64, h: f64, steps: usize) -> (Run, f64) {
+    let half = Vector3::new(0.1, 0.1, 0.1);
+    let mut b = floor(ModelBuilder::new().timestep(h), mu);
+    for (i, m) in masses.iter().enumerate() {
+        b = free_body(
+            b,
+            &format!("box{i}"),
+            *m,
+            Shape::Box { half_extents: half },
+            [0.0, 0.0, 0.1 + 0.2 * i as f64 + 1e-4 * i as f64],
+            [1.0, 0.0, 0.0, 0.0],
+            mu,
+            ContactModel::Nonlinear,
+        );
+    }
+    let model = b.compile().unwrap();
+    let mut state = State::reference(&model);
+    let start: Vec<_> = (1..model.nbody()).map(|b| state.pose(b).pos).collect();
+    let r = run(&model, &mut state, steps);
+    let drift = (1..model.nbody())
+        .map(|b| (state.pose(b).pos - start[b - 1]).xy().norm())
+        .fold(0.0, f64::max);
+    (r, drift)
+}
+
+#[test]
+fn five_box_stack_stands() {
+    let (r, drift) = stack(&[1.0; 5], 0.8, 0.01, 2000);
+    eprintln!(
+        "5-stack: min φ {:.2e}, iterations mean {:.1} max {}, horizontal drift {drift:.2e} m",
+        r.min_distance, r.mean_iterations, r.max_iterations
+    );
+    assert!(r.min_distance >= -1e-8 && drift < 1e-6 && r.final_speed < 1e-6);
+    assert!(r.max_iterations <= 30);
+}
+
+#[test]
+fn mass_ratio_stacks_are_stable() {
+    for masses in [[1.0, 10.0], [1.0, 1000.0], [1000.0, 1.0]] {
+        let (r, drift) = stack(&masses, 0.8, 0.01, 1000);
+        eprintln!(
+            "stack {masses:?}: min φ {:.2e}, iterations mean {:.1} max {}, drift {drift:.2e}",
+            r.min_distance, r.mean_iterations, r.max_iterations
+        );
+        assert!(
+            r.min_distance >= -1e-8 && drift < 1e-6 && r.final_speed < 1e-6,
+            "{masses:?}"
+        );
+        assert!(r.max_iterations <= 30);
+    }
+}
+
+#[test]
+fn high_and_zero_friction() {
+    let (r, _) = stack(&[1.0, 1.0], 2.0, 0.01, 500);
+    assert!(r.min_distance >= -1e-8 && r.max_iterations <= 30);
+    // μ = 0: a frictionless box keeps its horizontal velocity
+    let b = floor(ModelBuilder::new().timestep(0.01), 0.0);
+    let model = free_body(
+        b,
+        "box",
+        1.0,
+        Shape::Box {
+            half_extents: Vector3::new(0.1, 0.1, 0.1),
+        },
+        [0.0, 0.0, 0.1],
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+        ContactModel::Nonlinear,
+    )
+    .compile()
+    .unwrap();
+    assert_eq!(
+        model.variable_counts()[3],
+        ("contact_impact", 16),
+        "μ = 0 pairs carry no cone variables"
+    );
+    let mut state = State::reference(&model);
+    state.set_velocity(1, &Vector3::new(0.7, 0.0, 0.0), &Vector3::zeros());
+    let r = run(&model, &mut state, 300);
+    assert!(
+        (state.velocity(1).0.x - 0.7).abs() < 1e-9,
+        "frictionless slide lost speed: {:?}",
+        state.velocity(1).0
+    );
+    assert!(r.min_distance >= -1e-8);
+}

@@ -1,0 +1,86 @@
+"""Contact and limits through the Python API."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import ukemi
+
+
+def ball_on_floor(timestep=0.01, contact="nonlinear", friction=0.5, z=0.5):
+    b = ukemi.ModelBuilder(timestep=timestep)
+    b.add_geom("floor", "world", "plane", friction=friction, contact=contact)
+    b.add_body("ball", mass=2.0, inertia=(0.008, 0.008, 0.008), pos=(0, 0, z))
+    b.add_joint("free", "floating", "world", "ball")
+    b.add_geom("ball", "ball", "sphere", size=(0.1,), friction=friction, contact=contact)
+    return b.compile()
+
+
+def test_model_reports_contacts_and_variable_counts():
+    m = ball_on_floor()
+    assert m.ngeom == 2 and m.ncontact == 1
+    assert m.contact_pairs == [("ball", "floor", "nonlinear")]
+    counts = dict(m.variable_counts)
+    assert counts["contact_nonlinear_cone"] == 8 and counts["contact_impact"] == 0
+    assert dict(ball_on_floor(contact="impact").variable_counts)["contact_impact"] == 2
+    assert dict(ball_on_floor(contact="linear").variable_counts)["contact_linear_cone"] == 12
+    assert dict(ball_on_floor(friction=0.0).variable_counts)["contact_impact"] == 2
+
+
+def test_drop_never_penetrates_and_rests_with_weight_as_impulse():
+    m = ball_on_floor()
+    s = m.make_state()
+    np.testing.assert_allclose(ukemi.signed_distances(m, s), [0.4])
+    traj = ukemi.rollout(m, s, nsteps=300)
+    assert traj.min_distance.min() >= -1e-8
+    assert traj.qpos[-1, 2] == pytest.approx(0.1, abs=1e-6)
+    # at rest the normal impulse per step carries the weight: γ = m g h
+    gamma = traj.final_state.contact_impulse[0, 0]
+    assert gamma == pytest.approx(2.0 * 9.81 * 0.01, rel=1e-6)
+    assert np.abs(traj.qvel[-1]).max() < 1e-8
+
+
+def test_tilted_plane_via_normal():
+    b = ukemi.ModelBuilder()
+    n = np.array([0.0, -np.sin(0.3), np.cos(0.3)])
+    b.add_geom("ramp", "world", "plane", normal=n)
+    b.add_body("p", 1.0, (0.01, 0.01, 0.01), pos=tuple(0.5 * n))
+    b.add_joint("f", "free", "world", "p")
+    b.add_geom("pt", "p", "point")
+    m = b.compile()
+    assert ukemi.signed_distances(m, m.make_state())[0] == pytest.approx(0.5)
+
+
+def test_limits_hold_from_python():
+    b = ukemi.ModelBuilder()
+    b.add_body("bob", 1.0, (1e-3, 1e-3, 1e-3), pos=(0, 0, -1))
+    b.add_joint("h", "revolute", "world", "bob", axis=(0, 1, 0), child_anchor=(0, 0, 1),
+                range=(-0.2, 0.2))
+    m = b.compile()
+    assert m.nlimit == 1
+    traj = ukemi.rollout(m, m.make_state(qpos=[0.0], qvel=[4.0]), nsteps=200)
+    assert traj.qpos[:, 0].max() <= 0.2 + 1e-8
+    assert traj.qpos[:, 0].min() >= -0.2 - 1e-8
+
+
+def test_contact_argument_errors():
+    b = ukemi.ModelBuilder()
+    b.add_body("a", 1.0, (0.1, 0.1, 0.1))
+    b.add_joint("f", "free", "world", "a")
+    with pytest.raises(ukemi.ModelError, match="shape"):
+        b.add_geom("g", "a", "torus", size=(1,))
+    with pytest.raises(ukemi.ModelError, match="contact"):
+        b.add_geom("g", "a", "sphere", size=(0.1,), contact="sticky")
+    with pytest.raises(ukemi.ModelError, match="size"):
+        b.add_geom("g", "a", "box", size=(0.1,))
+    b.add_geom("g", "a", "sphere", size=(-0.1,))
+    with pytest.raises(ukemi.ModelError, match=r"geom\[g\]\.size"):
+        b.compile()
+    b2 = ukemi.ModelBuilder()
+    b2.add_body("a", 1.0, (0.1, 0.1, 0.1))
+    b2.add_joint("f", "free", "world", "a")
+    b2.add_geom("c", "a", "cylinder", size=(0.1, 0.1))
+    b2.add_geom("d", "world", "sphere", size=(0.1,))
+    with pytest.raises(ukemi.UnsupportedError, match="geom"):
+        b2.compile()
