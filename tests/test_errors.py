@@ -74,8 +74,6 @@ def test_builder_argument_errors():
         b.add_body("x", "heavy", (1, 1, 1))
     with pytest.raises(ukemi.InputError, match="pos"):
         b.add_body("x", 1.0, (1, 1, 1), pos=(0, np.nan, 0))
-    with pytest.raises(ukemi.UnsupportedError):
-        b.add_geom("g", body="x", shape="sphere", size=(0.1,))
     with pytest.raises(ukemi.ModelError, match="timestep"):
         ukemi.ModelBuilder(timestep=-0.1).compile()
 

@@ -1,6 +1,6 @@
 //! Drops on the floor at dt = 0.1, 0.01, 0.001: never below -1e-8 m, and at rest the bodies stay
 //! put (velocity < 1e-8 m/s after settling); solver iterations reported and bounded by 30.
-#[path = "contact_common.rs"]
+#[path = "common/contact.rs"]
 mod common;
 use common::*;
 use nalgebra::Vector3;

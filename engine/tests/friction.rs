@@ -1,7 +1,7 @@
 //! Coulomb friction with the exact cone: a box launched at 30° to the axes slides in a straight
 //! line and stops at v0²/(2μg); the pyramid drifts (size documented); on an incline the box
 //! slides with g(sin θ - μ cos θ) above the friction angle and sticks below it.
-#[path = "contact_common.rs"]
+#[path = "common/contact.rs"]
 mod common;
 use common::*;
 use nalgebra::Vector3;

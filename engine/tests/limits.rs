@@ -1,6 +1,6 @@
 //! Joint limits as inequality constraints: a pendulum swung into its limit holds it and releases
 //! when pushed away.
-#[path = "contact_common.rs"]
+#[path = "common/contact.rs"]
 mod common;
 use ukemi_engine::{
     ActuatorSpec, BodySpec, JointKind, JointSpec, ModelBuilder, SolveStatus, State, Workspace,

@@ -15,15 +15,17 @@ pub struct Options {
     pub max_iter: usize,
     /// Maximum backtracking halvings per Newton iteration. Default 10.
     pub max_ls: usize,
-    /// Complementarity (κ) tolerance of the interior-point solve: converged when every
-    /// `b ∘ c` is below it. It bounds contact softness: resting contacts hover at most
-    /// `kappa_tol / γ` above the surface. Default 1e-10.
+    /// Complementarity (κ) tolerance of the interior-point solve: converged when every pair's
+    /// `|b ∘ c| / max(1, |b|)` (b the impulse-like variable) is below it. It bounds contact softness: resting contacts hover at most
+    /// `kappa_tol / γ` above the surface, and a box held by static friction creeps at a speed
+    /// proportional to it. Default 1e-11.
     pub kappa_tol: f64,
-    /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 5.
+    /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
     /// Start contact and limit variables from the previous step's solution (pushed
-    /// `warm_start_margin` inside their cones) instead of the neutral point. Default false
-    /// (see BENCHMARKS.md for the measurement).
+    /// `warm_start_margin` inside their cones) instead of the neutral point. Default true: a
+    /// box sliding at 30° to the axes needs 1.6 iterations per step warm and 12.7 cold, and the
+    /// cold start stalled on 2 of 400 steps (BENCHMARKS.md).
     pub warm_start: bool,
     /// Margin inside the cones for warm-started variables. Default 1e-6.
     pub warm_start_margin: f64,
@@ -45,9 +47,9 @@ impl Default for Options {
             max_iter: 30,
             max_ls: 10,
             regularization: 1e-12,
-            kappa_tol: 1e-10,
-            undercut: 5.0,
-            warm_start: false,
+            kappa_tol: 1e-11,
+            undercut: 10.0,
+            warm_start: true,
             warm_start_margin: 1e-6,
             tau_min: 0.95,
             tau_max: 0.99,

@@ -111,6 +111,18 @@ pub(crate) fn prepare(
     }
 }
 
+/// Reset the iterate to the state's velocities and the neutral cone point (impulses keep their
+/// warm start: they are equality multipliers).
+fn restart_cold(model: &Model, state: &State, ws: &mut Workspace) {
+    for b in 1..model.nbody() {
+        let o = body_slot(model, b);
+        let (v, w) = state.velocity(b);
+        ws.w[o..o + 3].copy_from_slice(v.as_slice());
+        ws.w[o + 3..o + 6].copy_from_slice(w.as_slice());
+    }
+    super::inequality::initialize(model, state, ws, false);
+}
+
 /// Spring + actuator + applied generalized force on the free dofs of joint `ji`.
 fn generalized_force(
     model: &Model,
@@ -455,11 +467,19 @@ pub(crate) fn spin_limited_step(model: &Model, ws: &Workspace) -> f64 {
 /// Solve the prepared step: plain Newton without inequality nodes, the interior-point method
 /// with them. Leaves the solution in `ws.w` and `ws.next_pose`.
 pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
-    if model.topology.has_cones {
-        super::ipm::solve(model, state, ws)
-    } else {
-        solve_newton(model, state, ws)
+    if !model.topology.has_cones {
+        return solve_newton(model, state, ws);
     }
+    let first = super::ipm::solve(model, state, ws);
+    if first.status == SolveStatus::Converged || !model.options.warm_start {
+        return first;
+    }
+    // A warm start sits on the previous solution's cone boundary; when contacts change state
+    // (a box landing on another) that is a poor start. Retry from the neutral point.
+    restart_cold(model, state, ws);
+    let mut second = super::ipm::solve(model, state, ws);
+    second.iterations += first.iterations;
+    second
 }
 
 fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {

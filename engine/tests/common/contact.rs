@@ -12,6 +12,7 @@ pub fn floor(b: ModelBuilder, mu: f64) -> ModelBuilder {
 }
 
 /// A free body with one geom, COM at the body origin.
+#[allow(clippy::too_many_arguments)]
 pub fn free_body(
     b: ModelBuilder,
     name: &str,
