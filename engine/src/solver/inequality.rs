@@ -384,15 +384,15 @@ fn contact_diag(model: ContactModel, mu: f64, x: &[f64], d: &mut [f64]) {
     d.fill(0.0);
     let mut set = |r: usize, c: usize, v: f64| d[r * dim + c] = v;
     set(0, 1, 1.0); // s - φ
+    // orthant complementarity rows b c - κ: ∂/∂b = c, ∂/∂c = b
+    for &(p, q, r) in orthant_pairs(model) {
+        set(r, p, x[q]);
+        set(r, q, x[p]);
+    }
     match model {
-        ContactModel::Impact => {
-            set(1, 0, x[1]);
-            set(1, 1, x[0]);
-        }
+        ContactModel::Impact => {}
         ContactModel::Nonlinear => {
-            set(1, 0, x[1]);
-            set(1, 1, x[0]);
-            set(2, 2, 1.0);
+            set(2, 2, 1.0); // ξ₁ - μγ
             set(2, 0, -mu);
             // ξ ∘ η: row 3 = ξᵀη; rows 4,5 = ξ₁ η₂:₃ + η₁ ξ₂:₃
             for i in 0..3 {
@@ -404,27 +404,16 @@ fn contact_diag(model: ContactModel, mu: f64, x: &[f64], d: &mut [f64]) {
                 set(4 + i, 3 + i, x[5]);
                 set(4 + i, 5, x[3 + i]);
                 set(4 + i, 6 + i, x[2]);
-                set(6 + i, 6 + i, 1.0);
+                set(6 + i, 6 + i, 1.0); // η₂:₃ - v_t
             }
         }
         ContactModel::Linear => {
-            set(1, 3, 1.0);
+            set(1, 3, 1.0); // s_ψ - (μγ - Σβ)
             set(1, 0, -mu);
             for i in 0..4 {
                 set(1, 4 + i, 1.0);
-                set(2 + i, 8 + i, 1.0);
+                set(2 + i, 8 + i, 1.0); // η_i - (d_iᵀ v + ψ)
                 set(2 + i, 2, -1.0);
-            }
-            for (p, q, r) in [
-                (0, 1, 6),
-                (2, 3, 7),
-                (4, 8, 8),
-                (5, 9, 9),
-                (6, 10, 10),
-                (7, 11, 11),
-            ] {
-                set(r, p, x[q]);
-                set(r, q, x[p]);
             }
         }
     }
