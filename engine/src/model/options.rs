@@ -11,7 +11,7 @@ pub struct Options {
     /// Residual tolerance: the solve has converged when the ∞-norm of every residual row
     /// (momentum rows in N·s, constraint rows in m or quaternion units) is below it. Default 1e-10.
     pub rtol: f64,
-    /// Maximum Newton iterations per step. Default 30.
+    /// Maximum Newton / interior-point iterations per step. Default 50 (Dojo.jl's default).
     pub max_iter: usize,
     /// Maximum backtracking halvings per Newton iteration. Default 10.
     pub max_ls: usize,
@@ -44,7 +44,7 @@ impl Default for Options {
             timestep: 0.01,
             gravity: Vector3::new(0.0, 0.0, -9.81),
             rtol: 1e-10,
-            max_iter: 30,
+            max_iter: 50,
             max_ls: 10,
             regularization: 1e-12,
             kappa_tol: 1e-11,
