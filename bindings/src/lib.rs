@@ -1,5 +1,6 @@
 //! `ukemi._ukemi`: the Python extension. Registration only; see the sibling modules.
 mod errors;
+mod mjcf;
 mod model;
 mod state;
 mod step;

@@ -86,6 +86,8 @@ impl PyModelBuilder {
         ctrlrange: Option<(f64, f64)>,
     ) {
         self.inner.add_actuator(ActuatorSpec {
+            gain: 1.0,
+            bias: [0.0; 3],
             name,
             joint,
             dof,
@@ -287,9 +289,56 @@ impl PyModel {
             .map(|a| a.name.clone())
             .collect()
     }
+    /// Joint limits per velocity dof, (nv, 2); `(-inf, inf)` where a dof is unlimited.
+    #[getter]
+    fn dof_range<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let m = &self.inner;
+        let mut r = vec![[f64::NEG_INFINITY, f64::INFINITY]; m.nv];
+        for j in m.joints.iter().filter(|j| !j.is_loop) {
+            for &(dof, lo, hi) in &j.limits {
+                if let Some(x) = r.get_mut(j.qvel_adr + dof) {
+                    *x = [lo, hi];
+                }
+            }
+        }
+        PyArray1::from_vec(py, r.concat()).reshape([m.nv, 2])
+    }
+    /// Gear ratio of each actuator, (nu,).
+    #[getter]
+    fn actuator_gear<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.actuators.iter().map(|a| a.gear).collect())
+    }
+    /// Control range of each actuator, (nu, 2); `(-inf, inf)` where unclamped.
+    #[getter]
+    fn actuator_ctrlrange<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let flat: Vec<f64> = self
+            .inner
+            .actuators
+            .iter()
+            .flat_map(|a| {
+                let (lo, hi) = a.ctrlrange.unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+                [lo, hi]
+            })
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([self.inner.nu(), 2])
+    }
     #[getter]
     fn keyframe_names(&self) -> Vec<String> {
-        Vec::new()
+        self.inner
+            .keyframes
+            .iter()
+            .map(|k| k.name.clone())
+            .collect()
+    }
+    /// Load an MJCF file (warnings about ignored features become `UserWarning`s).
+    #[staticmethod]
+    fn from_xml_path(py: Python<'_>, path: std::path::PathBuf) -> PyResult<PyModel> {
+        crate::mjcf::from_path(py, &path.to_string_lossy())
+    }
+    /// Load MJCF text.
+    #[staticmethod]
+    fn from_xml_string(py: Python<'_>, xml: &str) -> PyResult<PyModel> {
+        crate::mjcf::from_string(py, xml)
     }
     #[getter]
     fn timestep(&self) -> f64 {
@@ -383,13 +432,22 @@ impl PyModel {
         key: Option<String>,
     ) -> PyResult<PyState> {
         guard(|| {
-            if let Some(k) = key {
-                return Err(crate::errors::InputError::new_err(format!(
-                    "invalid input: `key` = {k:?}: unknown keyframe (this model has none)"
-                )));
-            }
             let m = &self.inner;
+            let (mut qpos, mut qvel) = (qpos, qvel);
+            let mut time = 0.0;
+            if let Some(k) = key {
+                let names: Vec<&str> = m.keyframes.iter().map(|k| k.name.as_str()).collect();
+                let frame = m.keyframes.iter().find(|f| f.name == k).ok_or_else(|| {
+                    crate::errors::InputError::new_err(format!(
+                        "invalid input: `key` = {k:?}: unknown keyframe (this model has {names:?})"
+                    ))
+                })?;
+                qpos = Some(qpos.unwrap_or_else(|| frame.qpos.clone()));
+                qvel = Some(qvel.unwrap_or_else(|| frame.qvel.clone()));
+                time = frame.time;
+            }
             let mut state = State::reference(m);
+            state.time = time;
             if qpos.is_some() || qvel.is_some() {
                 let q = qpos.unwrap_or_else(|| m.qpos0.clone());
                 let v = qvel.unwrap_or_else(|| vec![0.0; m.nv]);

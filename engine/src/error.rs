@@ -44,6 +44,16 @@ pub enum Error {
     /// A feature is not supported.
     #[error("unsupported: {0}")]
     Unsupported(String),
+    /// An MJCF document is malformed or has an invalid value.
+    #[error("MJCF {source_name}:{line}: {msg}")]
+    Mjcf {
+        /// File path or `<string>`.
+        source_name: String,
+        /// 1-based line of the offending element (0 when unknown).
+        line: usize,
+        /// What is wrong: element, attribute and bad value.
+        msg: String,
+    },
 }
 
 /// Result alias of the engine.

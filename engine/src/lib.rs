@@ -31,6 +31,7 @@ pub mod integrator;
 pub mod joints;
 pub mod math;
 pub mod mechanics;
+pub mod mjcf;
 pub mod model;
 pub mod solver;
 pub mod state;
@@ -41,6 +42,8 @@ pub use contact::geometry::Shape;
 pub use error::{Error, Result};
 pub use joints::coordinates::{qpos, qvel, set_minimal};
 pub use joints::{Joint, JointKind};
-pub use model::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, Model, ModelBuilder, Options};
+pub use model::{
+    ActuatorSpec, BodySpec, GeomSpec, JointSpec, Keyframe, Model, ModelBuilder, Options,
+};
 pub use state::{SolveStatus, State, StepReport, Workspace};
 pub use step::{AppliedForces, rollout, step, step_with};

@@ -18,6 +18,8 @@ fn limit_holds_and_releases() {
         .body(BodySpec::new("bob", 1.0, [1e-3; 3]).pos([0.0, 0.0, -1.0]))
         .joint(j)
         .actuator(ActuatorSpec {
+            gain: 1.0,
+            bias: [0.0; 3],
             name: "m".into(),
             joint: "hinge".into(),
             dof: 0,

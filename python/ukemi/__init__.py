@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from . import _ukemi
 from ._builder import JOINT_KINDS, ModelBuilder
+from ._loaders import gymnasium_asset_path, load
 from ._simulate import STATUS_NAMES, Trajectory, rollout, signed_distances, step
 from ._ukemi import Model, State, StepInfo
 from .errors import (
@@ -51,6 +52,8 @@ __all__ = [
     "Trajectory",
     "UkemiError",
     "UnsupportedError",
+    "gymnasium_asset_path",
+    "load",
     "rollout",
     "signed_distances",
     "step",

@@ -117,7 +117,12 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
     for &ji in &model.topology.fk_order {
         let j = &model.joints[ji];
         let parent = pose_of(state, j.parent);
-        let q = &qpos[j.qpos_adr..j.qpos_adr + j.nq()];
+        // measured displacement = qpos - qpos_ref (MuJoCo's `ref`)
+        let mut q = [0.0; 7];
+        for (i, qi) in q[..j.nq()].iter_mut().enumerate() {
+            *qi = qpos[j.qpos_adr + i] - j.qpos_ref_at(i);
+        }
+        let q = &q[..j.nq()];
         let qd = &qvel[j.qvel_adr..j.qvel_adr + j.nfree()];
         let qj = joint_rotation(&j.rot, &q[j.ntrans..]);
         let rot_p = quat::rotation(&parent.quat);

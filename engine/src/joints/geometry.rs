@@ -5,7 +5,7 @@
 //! rotation `q ⊗ [1, δφ/2]`. Jacobians have 12 columns: parent `(δp, δφ)`, child `(δp, δφ)`.
 use nalgebra::{Matrix3, Matrix3x4, SMatrix, Vector3};
 
-use super::{Joint, RotDofs};
+use super::{Joint, RotDofs, hinges};
 use crate::math::quat::{self, Quat};
 use crate::math::spatial::skew;
 
@@ -92,7 +92,7 @@ impl JointFrame {
 
     /// Constraint values `k` (length `joint.ncon()`): constrained translations, then rotations.
     pub fn constraint(&self, joint: &Joint, out: &mut [f64]) {
-        let t = joint.trans_basis.transpose() * self.delta;
+        let t = joint.trans_dual.transpose() * self.delta;
         let mut r = 0;
         for i in joint.ntrans..3 {
             out[r] = t[i];
@@ -105,14 +105,14 @@ impl JointFrame {
                 out[r] = perp[0].dot(&v);
                 out[r + 1] = perp[1].dot(&v);
             }
-            RotDofs::Universal { a1, a2 } => out[r] = a1.dot(&(self.rot_j * a2)),
-            RotDofs::Ball => {}
+            RotDofs::Universal { a1, a2 } => out[r] = a1.dot(&(self.rot_j * a2)) - a1.dot(a2),
+            RotDofs::Ball | RotDofs::Hinges3 { .. } => {}
         }
     }
 
     /// Constraint Jacobian `∂k/∂(δp_p, δφ_p, δp_c, δφ_c)`, row-major `ncon × 12`.
     pub fn constraint_jacobian(&self, joint: &Joint, out: &mut [f64]) {
-        let dt = joint.trans_basis.transpose() * self.delta_jacobian(joint);
+        let dt = joint.trans_dual.transpose() * self.delta_jacobian(joint);
         let mut r = 0;
         for i in joint.ntrans..3 {
             out[12 * r..12 * r + 12].copy_from_slice(dt.row(i).transpose().as_slice());
@@ -145,7 +145,7 @@ impl JointFrame {
                 let p = self.rot_off * a1.cross(&(self.rot_j * a2));
                 put(r, p, c.transpose());
             }
-            RotDofs::Ball => {}
+            RotDofs::Ball | RotDofs::Hinges3 { .. } => {}
         }
     }
 
@@ -156,7 +156,7 @@ impl JointFrame {
     /// angular velocity in the child frame, `ω_rel = ω_c - R_jᵀ R_offᵀ ω_p`, through the pseudo-inverse
     /// of the joint's motion subspace `S` (`ω_rel = S qvel_rot`).
     pub fn free_jacobian(&self, joint: &Joint, out: &mut [f64]) {
-        let dt = joint.trans_basis.transpose() * self.delta_jacobian(joint);
+        let dt = joint.trans_dual.transpose() * self.delta_jacobian(joint);
         for i in 0..joint.ntrans {
             out[12 * i..12 * i + 12].copy_from_slice(dt.row(i).transpose().as_slice());
         }
@@ -170,8 +170,29 @@ impl JointFrame {
             out[12 * r..12 * r + 12].copy_from_slice(row.as_slice());
             r += 1;
         };
-        for s in self.motion_subspace(&joint.rot).iter().flatten() {
-            put(*s);
+        let cols = self.motion_subspace(&joint.rot);
+        let n = joint.rot.nfree();
+        if Self::orthonormal_subspace(&joint.rot) {
+            for s in cols.iter().flatten() {
+                put(*s);
+            }
+        } else {
+            // non-orthogonal hinge axes: θ̇ = S⁺ ω_rel (left inverse, not Sᵀ)
+            let s: Vec<Vector3<f64>> = cols.iter().flatten().copied().collect();
+            let mut rows = [Vector3::zeros(); 3];
+            hinges::left_inverse_rows(&s, &mut rows[..n]);
+            for row in &rows[..n] {
+                put(*row);
+            }
+        }
+    }
+
+    /// Whether the motion subspace has orthonormal columns (then `S⁺ = Sᵀ`).
+    fn orthonormal_subspace(rot: &RotDofs) -> bool {
+        match rot {
+            RotDofs::Universal { a1, a2 } => a1.dot(a2) == 0.0,
+            RotDofs::Hinges3 { .. } => false,
+            _ => true,
         }
     }
 
@@ -182,13 +203,21 @@ impl JointFrame {
             RotDofs::Hinge { axis, .. } => [Some(*axis), None, None],
             RotDofs::Universal { a1, a2 } => [Some(self.rot_j.transpose() * a1), Some(*a2), None],
             RotDofs::Ball => [Some(Vector3::x()), Some(Vector3::y()), Some(Vector3::z())],
+            RotDofs::Hinges3 { axes } => {
+                let s = hinges::hinges3_subspace(axes, &hinges::hinges3_angles(axes, &self.qj));
+                [
+                    Some(s.column(0).into()),
+                    Some(s.column(1).into()),
+                    Some(s.column(2).into()),
+                ]
+            }
         }
     }
 
     /// Minimal position coordinates (length `joint.nq()`): free translations, then rotation
     /// coordinates (angles in (-π, π], or the quaternion `q_joint` for a ball).
     pub fn coordinates(&self, joint: &Joint, out: &mut [f64]) {
-        let t = joint.trans_basis.transpose() * self.delta;
+        let t = joint.trans_dual.transpose() * self.delta;
         out[..joint.ntrans].copy_from_slice(&t.as_slice()[..joint.ntrans]);
         let r = &mut out[joint.ntrans..];
         match &joint.rot {
@@ -198,14 +227,24 @@ impl JointFrame {
                 let (w, s) = if w < 0.0 { (-w, -s) } else { (w, s) };
                 r[0] = 2.0 * s.atan2(w);
             }
-            RotDofs::Universal { a1, a2 } => {
+            RotDofs::Universal { a1, a2 } if a1.dot(a2) == 0.0 => {
                 let a3 = a1.cross(a2);
                 let ra2 = self.rot_j * a2;
                 let rta1 = self.rot_j.transpose() * a1;
                 r[0] = a3.dot(&ra2).atan2(a2.dot(&ra2));
                 r[1] = a3.dot(&rta1).atan2(a1.dot(&rta1));
             }
+            RotDofs::Universal { a1, a2 } => {
+                r[..2].copy_from_slice(&hinges::universal_angles(a1, a2, &self.rot_j));
+            }
+            RotDofs::Hinges3 { axes } => {
+                r[..3].copy_from_slice(&hinges::hinges3_angles(axes, &self.qj));
+            }
             RotDofs::Ball => r[..4].copy_from_slice(quat::wxyz(&self.qj).as_slice()),
+        }
+        // MuJoCo's `ref`: the reference configuration has qpos = qpos_ref (0 on quaternions)
+        for (c, off) in out.iter_mut().zip(&joint.qpos_ref) {
+            *c += off;
         }
     }
 
@@ -254,6 +293,7 @@ pub fn joint_rotation(rot: &RotDofs, q: &[f64]) -> Quat {
         RotDofs::Locked => quat::identity(),
         RotDofs::Hinge { axis, .. } => quat::axis_angle(axis, q[0]),
         RotDofs::Universal { a1, a2 } => quat::axis_angle(a1, q[0]) * quat::axis_angle(a2, q[1]),
+        RotDofs::Hinges3 { axes } => hinges::hinges3_rotation(axes, q),
         RotDofs::Ball => quat::from_wxyz(&q[..4]).normalize(),
     }
 }
@@ -264,6 +304,10 @@ pub fn joint_angvel(rot: &RotDofs, qj: &Quat, qd: &[f64]) -> Vector3<f64> {
         RotDofs::Locked => Vector3::zeros(),
         RotDofs::Hinge { axis, .. } => axis * qd[0],
         RotDofs::Universal { a1, a2 } => quat::rotation(qj).transpose() * a1 * qd[0] + a2 * qd[1],
+        RotDofs::Hinges3 { axes } => {
+            hinges::hinges3_subspace(axes, &hinges::hinges3_angles(axes, qj))
+                * Vector3::new(qd[0], qd[1], qd[2])
+        }
         RotDofs::Ball => Vector3::new(qd[0], qd[1], qd[2]),
     }
 }

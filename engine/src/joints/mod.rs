@@ -7,6 +7,7 @@
 //! dampers and inputs act. The sixteen combinations are the [`JointKind`] variants.
 pub mod coordinates;
 pub mod geometry;
+pub mod hinges;
 mod kind;
 
 pub use kind::JointKind;
@@ -28,8 +29,9 @@ pub enum RotDofs {
         /// The two unit axes perpendicular to `axis` (constrained directions).
         perp: [Vector3<f64>; 2],
     },
-    /// Two hinges in sequence (a Cardan/universal joint): `q_joint = q(a1, θ1) ⊗ q(a2, θ2)`,
-    /// `a1 ⟂ a2`; one constraint row `a1ᵀ R(q_joint) a2 = 0`.
+    /// Two hinges in sequence (a Cardan/universal joint): `q_joint = q(a1, θ1) ⊗ q(a2, θ2)`;
+    /// one constraint row `a1ᵀ R(q_joint) a2 = a1ᵀ a2` (zero for the kinds' orthogonal axes; MJCF
+    /// shoulders use non-orthogonal ones).
     Universal {
         /// First axis (attached to the parent side).
         a1: Vector3<f64>,
@@ -38,6 +40,17 @@ pub enum RotDofs {
     },
     /// Free rotation, coordinates a unit quaternion (MuJoCo's ball joint), no constraint row.
     Ball,
+    /// Three hinges in sequence (MuJoCo's three hinge joints about one point):
+    /// `q_joint = q(a1, θ1) ⊗ q(a2, θ2) ⊗ q(a3, θ3)`, axes possibly non-orthogonal; no constraint
+    /// row. The coordinates are the three angles, solved from `q_joint` (closed form for
+    /// orthogonal triads, refined by Newton's method). NOTE: like every Euler-angle chart this one
+    /// is singular where the motion subspace `[R₃ᵀR₂ᵀa1, R₃ᵀa2, a3]` loses rank (θ2 = ±π/2 for an
+    /// orthogonal triad: gimbal lock); there the angle rates are unbounded and the angles are
+    /// reported on the branch with |θ2| ≤ π/2.
+    Hinges3 {
+        /// Unit axes in sequence (first attached to the parent side).
+        axes: [Vector3<f64>; 3],
+    },
 }
 
 impl RotDofs {
@@ -47,7 +60,7 @@ impl RotDofs {
             RotDofs::Locked => 0,
             RotDofs::Hinge { .. } => 1,
             RotDofs::Universal { .. } => 2,
-            RotDofs::Ball => 3,
+            RotDofs::Ball | RotDofs::Hinges3 { .. } => 3,
         }
     }
     /// Number of rotational position coordinates (4 for a quaternion).
@@ -83,6 +96,9 @@ pub struct Joint {
     pub offset: Quat,
     /// Columns: translational axes in the joint frame; the first `ntrans` are free.
     pub trans_basis: Matrix3<f64>,
+    /// `trans_basisᵀ⁻¹` (equal to `trans_basis` when it is orthonormal): translation coordinates
+    /// are `trans_dualᵀ Δ`, so non-orthogonal free slide axes are measured along their own axes.
+    pub trans_dual: Matrix3<f64>,
     /// Number of free translational axes.
     pub ntrans: usize,
     /// Free rotations.
@@ -98,6 +114,12 @@ pub struct Joint {
     /// Limits `(free dof, lower, upper)` on coordinates (m or rad), solved as inequality
     /// constraints in the interior-point solve.
     pub limits: Vec<(usize, f64, f64)>,
+    /// Per position coordinate, the `qpos` value of the reference configuration (MuJoCo's joint
+    /// `ref`); 0 for quaternion entries. Coordinates are reported as the measured displacement plus
+    /// this offset. Empty means all zero.
+    pub qpos_ref: Vec<f64>,
+    /// Rotor inertia per free dof (MuJoCo's `armature`, kg or kg·m²); empty means none.
+    pub armature: Vec<f64>,
     /// First index in `qpos` (tree joints only).
     pub qpos_adr: usize,
     /// First index in `qvel` (tree joints only).
@@ -124,5 +146,13 @@ impl Joint {
     /// Whether any damper acts.
     pub fn has_damper(&self) -> bool {
         self.damping.iter().any(|&d| d != 0.0)
+    }
+    /// Whether any dof has armature (rotor inertia).
+    pub fn has_armature(&self) -> bool {
+        self.armature.iter().any(|&a| a != 0.0)
+    }
+    /// Reference offset of position coordinate `i` (see [`Joint::qpos_ref`]).
+    pub fn qpos_ref_at(&self, i: usize) -> f64 {
+        self.qpos_ref.get(i).copied().unwrap_or(0.0)
     }
 }

@@ -7,6 +7,7 @@ use crate::contact::{Contact, ContactModel, Geom};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::joints::{Joint, JointKind, RotDofs};
 use crate::math::quat;
+use crate::math::spatial::basis_from_axis;
 use crate::{Error, Result, ensure};
 
 /// A rigid body to add. Positions and orientation are the body frame's world pose at the
@@ -89,6 +90,18 @@ pub struct JointSpec {
     pub range: Option<Vec<(f64, f64)>>,
     /// This joint closes a kinematic loop (it is not part of the spanning tree).
     pub is_loop: bool,
+    /// Explicit free translation axes (child body frame), in `qpos` order; their number must be
+    /// the kind's. Empty: derived from `axis` ([`JointKind::frame`]). Used for MJCF bodies with
+    /// several slide joints (MuJoCo's dof order).
+    pub trans_axes: Vec<Vector3<f64>>,
+    /// Explicit hinge axes in sequence (child body frame), 1-3 of them, possibly non-orthogonal;
+    /// their number must be the kind's number of rotations (3 gives three hinges instead of a
+    /// ball). Empty: derived from `axis`. Used for MJCF bodies with several hinge joints.
+    pub rot_axes: Vec<Vector3<f64>>,
+    /// `qpos` of the reference configuration per scalar coordinate (MuJoCo's `ref`); empty: 0.
+    pub qpos_ref: Vec<f64>,
+    /// Rotor inertia (MuJoCo's `armature`): one value for every free dof, or one per dof.
+    pub armature: Vec<f64>,
 }
 
 impl JointSpec {
@@ -107,6 +120,10 @@ impl JointSpec {
             spring_ref: None,
             range: None,
             is_loop: false,
+            trans_axes: vec![],
+            rot_axes: vec![],
+            qpos_ref: vec![],
+            armature: vec![],
         }
     }
     /// Axis in the child body frame.
@@ -142,7 +159,10 @@ impl JointSpec {
     }
 }
 
-/// An actuator to add: force `gear · ctrl` on free dof `dof` of `joint`.
+/// An actuator to add: generalized force `gear · (gain · ctrl + bias₀ + bias₁ · gear · q +
+/// bias₂ · gear · q̇)` on free dof `dof` of `joint` (MuJoCo's affine `general` actuator with a joint
+/// transmission). A motor has `gain = 1`, `bias = 0`; a position servo `gain = kp`,
+/// `bias = [0, -kp, -kv]`; a velocity servo `gain = kv`, `bias = [0, 0, -kv]`.
 #[derive(Clone, Debug)]
 pub struct ActuatorSpec {
     /// Unique name.
@@ -155,6 +175,25 @@ pub struct ActuatorSpec {
     pub gear: f64,
     /// Control clamp.
     pub ctrlrange: Option<(f64, f64)>,
+    /// Gain on the control (1 for a motor).
+    pub gain: f64,
+    /// Bias terms: constant, per unit of actuator length `gear·q`, per unit of its rate.
+    pub bias: [f64; 3],
+}
+
+impl ActuatorSpec {
+    /// A motor: force `gear · clamp(ctrl)` on dof `dof` of `joint`.
+    pub fn motor(name: &str, joint: &str, dof: usize, gear: f64) -> Self {
+        ActuatorSpec {
+            name: name.to_string(),
+            joint: joint.to_string(),
+            dof,
+            gear,
+            ctrlrange: None,
+            gain: 1.0,
+            bias: [0.0; 3],
+        }
+    }
 }
 
 /// A collision geometry to add, posed in its body's frame.
@@ -227,6 +266,8 @@ pub struct ModelBuilder {
     actuators: Vec<ActuatorSpec>,
     geoms: Vec<GeomSpec>,
     excludes: Vec<(String, String)>,
+    geom_excludes: Vec<(String, String)>,
+    condim_max: bool,
 }
 
 impl ModelBuilder {
@@ -285,6 +326,18 @@ impl ModelBuilder {
         self.excludes.push((body_a.to_string(), body_b.to_string()));
     }
 
+    /// Never collide these two geoms (used by the MJCF loader for shape pairs without a
+    /// collision kernel, each reported as a warning).
+    pub fn add_geom_exclude(&mut self, geom_a: &str, geom_b: &str) {
+        self.geom_excludes
+            .push((geom_a.to_string(), geom_b.to_string()));
+    }
+    /// MuJoCo's pair rule: a pair is frictionless only if *both* geoms ask for
+    /// [`ContactModel::Impact`] (MuJoCo's `condim = max`), instead of either.
+    pub fn set_condim_max(&mut self, on: bool) {
+        self.condim_max = on;
+    }
+
     /// Validate everything and compile the immutable model.
     pub fn compile(&self) -> Result<Model> {
         self.options.validate()?;
@@ -321,6 +374,7 @@ impl ModelBuilder {
             nq,
             nv,
             qpos0: vec![],
+            keyframes: vec![],
             topology,
         };
         let reference = crate::State::reference(&model);
@@ -453,6 +507,12 @@ impl ModelBuilder {
                 let (Some(ma), Some(mb)) = (ga.model, gb.model) else {
                     continue;
                 };
+                let pair_excluded = self.geom_excludes.iter().any(|(x, y)| {
+                    (*x == ga.name && *y == gb.name) || (*x == gb.name && *y == ga.name)
+                });
+                if pair_excluded {
+                    continue;
+                }
                 let affinity =
                     (ga.contype & gb.conaffinity) != 0 || (gb.contype & ga.conaffinity) != 0;
                 if ga.body == gb.body
@@ -463,7 +523,14 @@ impl ModelBuilder {
                     continue;
                 }
                 let friction = ga.friction.max(gb.friction);
-                let model = pair_model(ma, mb, friction);
+                let model = if self.condim_max
+                    && (ma == ContactModel::Impact) != (mb == ContactModel::Impact)
+                {
+                    let other = if ma == ContactModel::Impact { mb } else { ma };
+                    pair_model(other, other, friction)
+                } else {
+                    pair_model(ma, mb, friction)
+                };
                 let (features, swapped) =
                     geometry::candidates(&ga.shape, &gb.shape).map_err(|e| {
                         Error::Unsupported(format!(
@@ -505,6 +572,10 @@ impl ModelBuilder {
                 spec.gear.is_finite(),
                 Error::model(f("gear"), spec.gear, "must be finite")
             );
+            ensure!(
+                spec.gain.is_finite() && spec.bias.iter().all(|b| b.is_finite()),
+                Error::model(f("gain/bias"), (spec.gain, spec.bias), "must be finite")
+            );
             if let Some((lo, hi)) = spec.ctrlrange {
                 ensure!(
                     lo.is_finite() && hi.is_finite() && lo < hi,
@@ -517,6 +588,8 @@ impl ModelBuilder {
                 dof: spec.dof,
                 gear: spec.gear,
                 ctrlrange: spec.ctrlrange,
+                gain: spec.gain,
+                bias: spec.bias,
             });
         }
         Ok(out)
@@ -673,8 +746,9 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
     let (pb, cb) = (&bodies[parent], &bodies[child]);
     // The axis is given in the child body frame; the joint frame is the child's reference frame,
     // which has the same orientation, so the axis is used as is.
-    let (trans_basis, rot) = spec.kind.frame(&(spec.axis / norm));
-    let floating = spec.kind == JointKind::Floating;
+    let (trans_basis, trans_dual, rot) = joint_axes(spec, &(spec.axis / norm))?;
+    let floating =
+        spec.kind == JointKind::Floating && spec.trans_axes.is_empty() && spec.rot_axes.is_empty();
     // Floating joints (MuJoCo's free joint) measure the child body frame's pose in the parent
     // body frame: no orientation offset, anchors at the body frame origins.
     let (pa, ca) = if floating {
@@ -697,6 +771,7 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         child_anchor: ca - cb.com,
         offset,
         trans_basis,
+        trans_dual,
         ntrans: spec.kind.ntrans(),
         rot,
         is_loop: spec.is_loop,
@@ -704,9 +779,32 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         stiffness: broadcast(&spec.stiffness, nfree, &f("stiffness"))?,
         damping: broadcast(&spec.damping, nfree, &f("damping"))?,
         spring_ref: vec![],
+        qpos_ref: vec![],
+        armature: if spec.armature.is_empty() {
+            vec![]
+        } else {
+            broadcast(&spec.armature, nfree, &f("armature"))?
+        },
         qpos_adr: 0,
         qvel_adr: 0,
     };
+    if !spec.qpos_ref.is_empty() {
+        check_finite(&spec.qpos_ref, &f("qpos_ref"))?;
+        let quat_entries = (joint.ntrans..joint.nq()).filter(|_| joint.rot.nq() == 4);
+        ensure!(
+            spec.qpos_ref.len() == joint.nq()
+                && quat_entries.clone().all(|i| spec.qpos_ref[i] == 0.0),
+            Error::model(
+                f("qpos_ref"),
+                &spec.qpos_ref,
+                format!(
+                    "need {} values (qpos of the joint), 0 on quaternion entries",
+                    joint.nq()
+                )
+            )
+        );
+        joint.qpos_ref = spec.qpos_ref.clone();
+    }
     if let Some(r) = &spec.spring_ref {
         check_finite(r, &f("spring_ref"))?;
         ensure!(
@@ -761,22 +859,123 @@ fn compile_limits(spec: &JointSpec, nfree: usize) -> Result<Vec<(usize, f64, f64
         )
     );
     ensure!(
-        spec.kind.nrot() < 3,
+        spec.kind.nrot() < 3 || spec.rot_axes.len() == 3,
         Error::Unsupported(format!(
             "{field}: limits on ball rotations (quaternion coordinates) are not supported"
         ))
     );
+    // (-inf, inf) leaves a dof unlimited (a composite MJCF joint may limit only some dofs)
+    let unlimited = |lo: f64, hi: f64| lo == f64::NEG_INFINITY && hi == f64::INFINITY;
     for &(lo, hi) in range {
         ensure!(
-            lo.is_finite() && hi.is_finite() && lo < hi,
+            unlimited(lo, hi) || (lo.is_finite() && hi.is_finite() && lo < hi),
             Error::model(&field, range, "need finite lower < upper")
         );
     }
     Ok(range
         .iter()
         .enumerate()
+        .filter(|(_, (lo, hi))| !unlimited(*lo, *hi))
         .map(|(i, &(lo, hi))| (i, lo, hi))
         .collect())
+}
+
+/// Unit axes of `axes`, each finite and non-zero.
+fn unit_axes(axes: &[Vector3<f64>], field: &str) -> Result<Vec<Vector3<f64>>> {
+    axes.iter()
+        .map(|a| {
+            check_finite(a.as_slice(), field)?;
+            let n = a.norm();
+            ensure!(
+                n > 1e-9,
+                Error::model(field, a.as_slice(), "axis must have non-zero length")
+            );
+            Ok(a / n)
+        })
+        .collect()
+}
+
+/// Translational basis, its dual (inverse transpose) and the rotational dofs of a joint: from
+/// the kind and `axis`, or from the explicit axes of the spec.
+fn joint_axes(
+    spec: &JointSpec,
+    axis: &Vector3<f64>,
+) -> Result<(Matrix3<f64>, Matrix3<f64>, RotDofs)> {
+    let f = |field: &str| format!("joint[{}].{field}", spec.name);
+    let (mut basis, mut rot) = spec.kind.frame(axis);
+    let mut dual = basis;
+    if !spec.trans_axes.is_empty() {
+        let field = f("trans_axes");
+        ensure!(
+            spec.trans_axes.len() == spec.kind.ntrans(),
+            Error::model(
+                &field,
+                spec.trans_axes.len(),
+                format!(
+                    "kind {} needs {} axes",
+                    spec.kind.name(),
+                    spec.kind.ntrans()
+                )
+            )
+        );
+        let mut cols = unit_axes(&spec.trans_axes, &field)?;
+        match cols.len() {
+            1 => {
+                let m = basis_from_axis(&cols[0]);
+                cols.extend([m.column(1).into_owned(), m.column(2).into_owned()]);
+            }
+            2 => cols.push(cols[0].cross(&cols[1]).normalize()),
+            _ => {}
+        }
+        basis = Matrix3::from_columns(&cols);
+        let inv = basis
+            .try_inverse()
+            .filter(|_| basis.determinant().abs() > 1e-9);
+        dual = inv
+            .ok_or_else(|| {
+                Error::model(
+                    &field,
+                    &spec.trans_axes,
+                    "slide axes must be linearly independent",
+                )
+            })?
+            .transpose();
+    }
+    if !spec.rot_axes.is_empty() {
+        let field = f("rot_axes");
+        let n = spec.rot_axes.len();
+        ensure!(
+            n == spec.kind.nrot(),
+            Error::model(
+                &field,
+                n,
+                format!("kind {} needs {} axes", spec.kind.name(), spec.kind.nrot())
+            )
+        );
+        let a = unit_axes(&spec.rot_axes, &field)?;
+        ensure!(
+            a.windows(2).all(|w| w[0].cross(&w[1]).norm() > 1e-6),
+            Error::model(
+                &field,
+                &spec.rot_axes,
+                "consecutive hinge axes must not be parallel"
+            )
+        );
+        rot = match n {
+            1 => {
+                let m = basis_from_axis(&a[0]);
+                RotDofs::Hinge {
+                    axis: a[0],
+                    perp: [m.column(1).into_owned(), m.column(2).into_owned()],
+                }
+            }
+            2 => RotDofs::Universal { a1: a[0], a2: a[1] },
+            _ => RotDofs::Hinges3 {
+                axes: [a[0], a[1], a[2]],
+            },
+        };
+    }
+    Ok((basis, dual, rot))
 }
 
 fn joint_frame_at_reference(joint: &Joint, bodies: &[Body]) -> JointFrame {

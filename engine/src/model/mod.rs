@@ -30,7 +30,8 @@ pub struct Body {
     pub ref_pose: Pose,
 }
 
-/// An actuator: a generalized force `gear · clamp(ctrl)` on one free dof of a joint.
+/// An actuator: a generalized force `gear · (gain · clamp(ctrl) + bias₀ + bias₁ gear q +
+/// bias₂ gear q̇)` on one free dof of a joint (`gain = 1`, `bias = 0`: a motor).
 #[derive(Clone, Debug)]
 pub struct Actuator {
     /// Unique name.
@@ -43,6 +44,32 @@ pub struct Actuator {
     pub gear: f64,
     /// Control clamp, if any.
     pub ctrlrange: Option<(f64, f64)>,
+    /// Gain on the control.
+    pub gain: f64,
+    /// Bias: constant, per unit of `gear·q`, per unit of `gear·q̇` (position/velocity servos).
+    pub bias: [f64; 3],
+}
+
+impl Actuator {
+    /// Whether the force depends on the joint state (a servo), not only on the control.
+    pub fn has_bias(&self) -> bool {
+        self.bias[1] != 0.0 || self.bias[2] != 0.0
+    }
+}
+
+/// A named configuration (MJCF `keyframe/key`): minimal coordinates and controls.
+#[derive(Clone, Debug, Default)]
+pub struct Keyframe {
+    /// Name (may be empty).
+    pub name: String,
+    /// Simulation time (s).
+    pub time: f64,
+    /// Positions, length `nq`.
+    pub qpos: Vec<f64>,
+    /// Velocities, length `nv`.
+    pub qvel: Vec<f64>,
+    /// Controls, length `nu`.
+    pub ctrl: Vec<f64>,
 }
 
 /// Compiled, immutable model.
@@ -66,6 +93,8 @@ pub struct Model {
     pub nv: usize,
     /// `qpos` of the reference configuration.
     pub qpos0: Vec<f64>,
+    /// Named configurations (MJCF keyframes); empty for models built in code.
+    pub keyframes: Vec<Keyframe>,
     pub(crate) topology: Topology,
 }
 

@@ -126,7 +126,7 @@ impl Topology {
                 edges.extend(p.map(|p| (jn, p)));
                 edges.extend(c.map(|c| (jn, c)));
             }
-            if let (Some(p), Some(c), true) = (p, c, joint.has_damper()) {
+            if let (Some(p), Some(c), true) = (p, c, joint.has_damper() || joint.has_armature()) {
                 edges.push((p, c));
             }
         }
@@ -153,7 +153,7 @@ impl Topology {
                 JointBlocks {
                     jp: jn.zip(p).and_then(|(jn, p)| blk(jn, p)),
                     jc: jn.zip(c).and_then(|(jn, c)| blk(jn, c)),
-                    pc: if joint.has_damper() {
+                    pc: if joint.has_damper() || joint.has_armature() {
                         p.zip(c).and_then(|(p, c)| blk(p, c))
                     } else {
                         None

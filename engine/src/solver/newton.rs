@@ -86,6 +86,8 @@ pub(crate) fn prepare(
         frame.free_jacobian(joint, &mut ws.free_jac[fa..fa + 12 * nf]);
         let mut tau = [0.0; 6];
         generalized_force(model, ji, &frame, ctrl, forces, &mut tau[..nf]);
+        let jf = &ws.free_jac[fa..fa + 12 * nf];
+        super::servo::add_servo_bias(model, state, ji, &frame, jf, &mut tau[..nf]);
         if tau[..nf].iter().any(|&t| t != 0.0) {
             let jf = &ws.free_jac[fa..fa + 12 * nf];
             add_jt_times(&mut ws.applied, joint, jf, &tau[..nf], h);
@@ -148,7 +150,7 @@ fn generalized_force(
             Some((lo, hi)) => ctrl[a].clamp(lo, hi),
             None => ctrl[a],
         };
-        tau[act.dof] += act.gear * u;
+        tau[act.dof] += act.gear * act.gain * u;
     }
     if let (Some(q), false) = (forces.qfrc, joint.is_loop) {
         for (i, t) in tau.iter_mut().enumerate() {
@@ -293,6 +295,10 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
         if joint.has_damper() {
             add_damper_residual(model, joint, &free_jac[free_adr[ji]..], w, residual, h);
         }
+        if joint.has_armature() {
+            let jf = &free_jac[free_adr[ji]..];
+            super::armature::add_armature_residual(model, state, joint, jf, w, residual);
+        }
     }
 }
 
@@ -410,6 +416,9 @@ fn assemble_joint(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h
     }
     if joint.has_damper() {
         add_damper_blocks(model, ws, ji, joint, h);
+    }
+    if joint.has_armature() {
+        super::armature::add_armature_blocks(model, ws, ji, joint);
     }
 }
 
@@ -610,6 +619,9 @@ mod tests {
                 .anchors(pa.into(), ca.into());
             if *kind == JointKind::Cylindrical {
                 j = j.damping(0.7);
+            }
+            if matches!(*kind, JointKind::Revolute | JointKind::Orbital) {
+                j.armature = vec![0.4];
             }
             b = b.joint(j);
             prev = pos;

@@ -1,0 +1,300 @@
+//! `<actuator>` (motor, position, velocity, general with a joint transmission), `<keyframe>`,
+//! `<equality>` (connect and weld as loop-closing joints) and `<contact>` (exclude).
+use nalgebra::Vector3;
+use roxmltree::Node;
+
+use super::body::Tree;
+use super::parse::{Ctx, elements};
+use crate::model::Keyframe;
+use crate::{ActuatorSpec, JointKind, JointSpec, ModelBuilder, Result};
+
+pub(super) fn read_actuators<'a, 'i>(
+    ctx: &mut Ctx<'a, 'i>,
+    node: Node<'a, 'i>,
+    tree: &Tree,
+    b: &mut ModelBuilder,
+) -> Result<()> {
+    for (i, a) in elements(node).enumerate() {
+        let tag = a.tag_name().name();
+        if !["motor", "position", "velocity", "general"].contains(&tag) {
+            return Err(ctx.unsupported(a, format!("actuator type <{tag}> is not supported (motor, position, velocity, general are)")));
+        }
+        let class = ctx.class_of(a, "main")?;
+        let name = a
+            .attribute("name")
+            .map_or_else(|| format!("actuator{i}"), str::to_string);
+        ctx.lines.insert(format!("actuator[{name}]"), ctx.line(a));
+        for t in [
+            "tendon",
+            "site",
+            "body",
+            "jointinparent",
+            "cranksite",
+            "slidersite",
+        ] {
+            if a.attribute(t).is_some() {
+                return Err(ctx.unsupported(
+                    a,
+                    format!(
+                        "actuator {name:?}: `{t}` transmission is not supported (only `joint`)"
+                    ),
+                ));
+            }
+        }
+        let joint = a
+            .attribute("joint")
+            .ok_or_else(|| ctx.err(a, format!("actuator {name:?} needs a `joint`")))?;
+        let map = tree
+            .joints
+            .iter()
+            .find(|j| j.name == joint)
+            .ok_or_else(|| ctx.err(a, format!("attribute `joint` = {joint:?}: unknown joint")))?;
+        if map.kind == "ball" || map.kind == "free" {
+            return Err(ctx.unsupported(a, format!("actuator {name:?} on a {} joint", map.kind)));
+        }
+        let gear = ctx.nums_padded(a, &class, "gear", &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0])?[0];
+        let ctrlrange = ctx.nums(a, &class, "ctrlrange", 2)?;
+        let limited = ctx
+            .tristate(a, &class, "ctrllimited")?
+            .unwrap_or(ctx.compiler.autolimits && ctrlrange.is_some());
+        let ctrlrange = match (limited, ctrlrange) {
+            (false, _) => None,
+            (true, Some(r)) if r[0] < r[1] => Some((r[0], r[1])),
+            (true, r) => {
+                return Err(ctx.err(
+                    a,
+                    format!("attribute `ctrlrange` = {r:?}: need lower < upper when ctrllimited"),
+                ));
+            }
+        };
+        let forcelimited = ctx.tristate(a, &class, "forcelimited")?;
+        if forcelimited
+            .unwrap_or(ctx.compiler.autolimits && ctx.raw(a, &class, "forcerange").is_some())
+        {
+            ctx.warn(
+                a,
+                "`forcerange` (actuator force clamp) is not supported and is ignored",
+            );
+        }
+        let (gain, bias) = gain_bias(ctx, a, &class, tag)?;
+        let mut spec = ActuatorSpec::motor(&name, &map.engine_joint, map.dof, gear);
+        spec.ctrlrange = ctrlrange;
+        spec.gain = gain;
+        spec.bias = bias;
+        b.add_actuator(spec);
+    }
+    Ok(())
+}
+
+/// MuJoCo's gain and affine bias of each actuator shortcut.
+fn gain_bias<'a, 'i>(
+    ctx: &Ctx<'a, 'i>,
+    a: Node<'a, 'i>,
+    class: &str,
+    tag: &str,
+) -> Result<(f64, [f64; 3])> {
+    for t in ["dampratio", "timeconst", "inheritrange"] {
+        if a.attribute(t).is_some_and(|v| v.trim() != "0") {
+            return Err(ctx.unsupported(a, format!("actuator attribute `{t}`")));
+        }
+    }
+    Ok(match tag {
+        "motor" => (1.0, [0.0; 3]),
+        "position" => {
+            let kp = ctx.num(a, class, "kp", 1.0)?;
+            let kv = ctx.num(a, class, "kv", 0.0)?;
+            (kp, [0.0, -kp, -kv])
+        }
+        "velocity" => {
+            let kv = ctx.num(a, class, "kv", 1.0)?;
+            (kv, [0.0, 0.0, -kv])
+        }
+        _ => {
+            let dyn_type = ctx.keyword(
+                a,
+                class,
+                "dyntype",
+                &[
+                    "none",
+                    "integrator",
+                    "filter",
+                    "filterexact",
+                    "muscle",
+                    "user",
+                ],
+                "none",
+            )?;
+            let gain_type = ctx.keyword(
+                a,
+                class,
+                "gaintype",
+                &["fixed", "affine", "muscle", "user"],
+                "fixed",
+            )?;
+            let bias_type = ctx.keyword(
+                a,
+                class,
+                "biastype",
+                &["none", "affine", "muscle", "user"],
+                "none",
+            )?;
+            if dyn_type != "none"
+                || gain_type != "fixed"
+                || !["none", "affine"].contains(&bias_type.as_str())
+            {
+                return Err(ctx.unsupported(
+                    a,
+                    format!("general actuator with dyntype={dyn_type:?} gaintype={gain_type:?} biastype={bias_type:?} (only none/fixed/affine)"),
+                ));
+            }
+            let g = ctx.nums_padded(a, class, "gainprm", &[1.0; 10])?;
+            let bp = ctx.nums_padded(a, class, "biasprm", &[0.0; 10])?;
+            let bias = if bias_type == "affine" {
+                [bp[0], bp[1], bp[2]]
+            } else {
+                [0.0; 3]
+            };
+            (g[0], bias)
+        }
+    })
+}
+
+pub(super) fn read_keyframes<'a, 'i>(
+    ctx: &Ctx<'a, 'i>,
+    node: Node<'a, 'i>,
+    qpos0: &[f64],
+    nv: usize,
+    nu: usize,
+) -> Result<Vec<Keyframe>> {
+    let mut out = Vec::new();
+    for k in elements(node) {
+        if k.tag_name().name() != "key" {
+            return Err(ctx.err(k, "expected <key>"));
+        }
+        for t in ["act", "mpos", "mquat"] {
+            if k.attribute(t).is_some() {
+                return Err(ctx.unsupported(k, format!("keyframe attribute `{t}`")));
+            }
+        }
+        let vec = |name: &str, n: usize, default: Vec<f64>| -> Result<Vec<f64>> {
+            match ctx.nums(k, "", name, 0)? {
+                None => Ok(default),
+                Some(v) if v.len() == n => Ok(v),
+                Some(v) => Err(ctx.err(
+                    k,
+                    format!(
+                        "attribute `{name}` has {} numbers, the model needs {n}",
+                        v.len()
+                    ),
+                )),
+            }
+        };
+        out.push(Keyframe {
+            name: k.attribute("name").unwrap_or("").to_string(),
+            time: ctx.num(k, "", "time", 0.0)?,
+            qpos: vec("qpos", qpos0.len(), qpos0.to_vec())?,
+            qvel: vec("qvel", nv, vec![0.0; nv])?,
+            ctrl: vec("ctrl", nu, vec![0.0; nu])?,
+        });
+    }
+    Ok(out)
+}
+
+pub(super) fn read_equality<'a, 'i>(
+    ctx: &mut Ctx<'a, 'i>,
+    node: Node<'a, 'i>,
+    tree: &Tree,
+    b: &mut ModelBuilder,
+) -> Result<()> {
+    for (i, e) in elements(node).enumerate() {
+        let tag = e.tag_name().name();
+        if !["connect", "weld"].contains(&tag) {
+            return Err(ctx.unsupported(
+                e,
+                format!("equality <{tag}> is not supported (connect and weld are)"),
+            ));
+        }
+        if e.attribute("active") == Some("false") {
+            ctx.warn(e, "inactive equality constraint skipped");
+            continue;
+        }
+        if e.attribute("site1").is_some() || e.attribute("site2").is_some() {
+            return Err(ctx.unsupported(e, "equality between sites"));
+        }
+        let body = |attr: &str| -> Result<usize> {
+            let n = e.attribute(attr).unwrap_or("world");
+            tree.body_id(n)
+                .ok_or_else(|| ctx.err(e, format!("attribute `{attr}` = {n:?}: unknown body")))
+        };
+        let (b1, b2) = (body("body1")?, body("body2")?);
+        let (e1, e2) = (tree.bodies[b1].engine, tree.bodies[b2].engine);
+        if e1 == e2 {
+            return Err(ctx.err(e, "equality between two parts of the same rigid body"));
+        }
+        let name = e
+            .attribute("name")
+            .map_or_else(|| format!("equality{i}"), str::to_string);
+        ctx.lines.insert(format!("joint[{name}]"), ctx.line(e));
+        let (f1, f2) = (tree.engine_bodies[e1].1, tree.engine_bodies[e2].1);
+        let (kind, point) = if tag == "connect" {
+            let a = ctx
+                .nums(e, "", "anchor", 3)?
+                .ok_or_else(|| ctx.err(e, "`anchor` is required"))?;
+            (
+                JointKind::Spherical,
+                tree.bodies[b1].world.point(&Vector3::from_column_slice(&a)),
+            )
+        } else {
+            let relpose = ctx.nums(e, "", "relpose", 7)?;
+            if relpose.is_some_and(|rp| rp[3..].iter().any(|x| *x != 0.0)) {
+                return Err(ctx.unsupported(
+                    e,
+                    "weld with an explicit `relpose` (the reference pose is used when it is omitted)",
+                ));
+            }
+            (JointKind::Fixed, tree.bodies[b1].world.pos)
+        };
+        let (parent, child) = (
+            tree.engine_bodies[e1].0.clone(),
+            tree.engine_bodies[e2].0.clone(),
+        );
+        b.add_joint(
+            JointSpec::new(&name, kind, &parent, &child)
+                .anchors(
+                    f1.inverse_point(&point).into(),
+                    f2.inverse_point(&point).into(),
+                )
+                .closing_loop(),
+        );
+    }
+    Ok(())
+}
+
+pub(super) fn read_contact<'a, 'i>(
+    ctx: &mut Ctx<'a, 'i>,
+    node: Node<'a, 'i>,
+    tree: &Tree,
+    b: &mut ModelBuilder,
+) -> Result<()> {
+    for e in elements(node) {
+        if e.tag_name().name() != "exclude" {
+            return Err(ctx.unsupported(e, "contact <pair> is not supported (exclude is)"));
+        }
+        let body = |attr: &str| -> Result<usize> {
+            let n = e
+                .attribute(attr)
+                .ok_or_else(|| ctx.err(e, format!("`{attr}` is required")))?;
+            tree.body_id(n)
+                .ok_or_else(|| ctx.err(e, format!("attribute `{attr}` = {n:?}: unknown body")))
+        };
+        let (b1, b2) = (body("body1")?, body("body2")?);
+        let (n1, n2) = (
+            tree.engine_name(b1).to_string(),
+            tree.engine_name(b2).to_string(),
+        );
+        if n1 != n2 {
+            b.add_exclude(&n1, &n2);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,313 @@
+"""MJCF loader: the same file loaded by ukemi and by MuJoCo gives the same model (sizes, masses,
+inertias, kinematics at qpos0, keyframes and random configurations, limits, actuators); a
+contact-free trajectory converges to MuJoCo's as the time step shrinks; malformed or unsupported
+files raise ukemi errors that name the element and line, never anything else."""
+
+from __future__ import annotations
+
+import random
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ukemi
+
+mujoco = pytest.importorskip("mujoco")
+pytest.importorskip("gymnasium")
+
+GYM = ["hopper", "half_cheetah", "ant", "walker2d", "humanoid", "inverted_pendulum",
+       "inverted_double_pendulum", "reacher", "swimmer", "pusher"]
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "models"
+# shared models that use features ukemi does not support: the error must say which
+SHARED_UNSUPPORTED = {
+    "humanoid": "foot_right",     # ankle hinges at two different points of one body
+    "panda": "equality <joint>",  # finger coupling
+    "x2": "site",                 # thrusters act on sites
+}
+TOL = 1e-9
+
+
+def load(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return ukemi.Model.from_xml_path(str(path))
+
+
+def mj_body(mj, name):
+    """MuJoCo body id of a ukemi body; unnamed MJCF bodies are ``body<id>`` in ukemi."""
+    try:
+        return mj.body(name).id
+    except KeyError:
+        return int(re.fullmatch(r"body(\d+)", name).group(1))
+
+
+def quat_close(a, b, tol):
+    return min(np.abs(a - b).max(), np.abs(a + b).max()) < tol
+
+
+def compare_kinematics(uk, mj, qpos, label):
+    """Body frames of ukemi's state at `qpos` against mujoco.mj_kinematics."""
+    d = mujoco.MjData(mj)
+    d.qpos[:] = qpos
+    mujoco.mj_kinematics(mj, d)
+    state = uk.make_state(qpos=qpos)
+    for i, name in enumerate(uk.body_names[1:], start=1):
+        b = mj_body(mj, name)
+        np.testing.assert_allclose(state.body_pos[i], d.xpos[b], atol=TOL,
+                                   err_msg=f"{label}: body_pos[{name}]")
+        assert quat_close(state.body_quat[i], d.xquat[b], 1e-9), (
+            f"{label}: body_quat[{name}] {state.body_quat[i]} vs {d.xquat[b]}")
+    return state
+
+
+def random_qpos(mj, rng):
+    q = mj.qpos0.copy()
+    for j in range(mj.njnt):
+        a = mj.jnt_qposadr[j]
+        t = mj.jnt_type[j]
+        if t == mujoco.mjtJoint.mjJNT_FREE:
+            q[a:a + 3] += rng.normal(size=3) * 0.3
+            v = rng.normal(size=4)
+            q[a + 3:a + 7] = v / np.linalg.norm(v)
+        elif t == mujoco.mjtJoint.mjJNT_BALL:
+            v = rng.normal(size=4)
+            q[a:a + 4] = v / np.linalg.norm(v)
+        else:
+            lo, hi = mj.jnt_range[j] if mj.jnt_limited[j] else (-1.0, 1.0)
+            q[a] = rng.uniform(lo, hi)
+    return q
+
+
+def check_against_mujoco(path):
+    uk = load(path)
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    assert (uk.nq, uk.nv, uk.nu) == (mj.nq, mj.nv, mj.nu)
+    np.testing.assert_allclose(uk.qpos0, mj.qpos0, atol=TOL, err_msg="qpos0")
+    # masses and inertias, compared as full tensors in the body frame
+    for i, name in enumerate(uk.body_names[1:], start=1):
+        b = mj_body(mj, name)
+        np.testing.assert_allclose(uk.body_mass[i], mj.body_mass[b], rtol=TOL,
+                                   err_msg=f"body_mass[{name}]")
+        r = np.zeros(9)
+        mujoco.mju_quat2Mat(r, mj.body_iquat[b])
+        r = r.reshape(3, 3)
+        full = r @ np.diag(mj.body_inertia[b]) @ r.T
+        scale = np.abs(full).max()
+        np.testing.assert_allclose(uk.body_inertia[i], full, atol=TOL * scale,
+                                   err_msg=f"body_inertia[{name}]")
+        np.testing.assert_allclose(uk.body_com[i], mj.body_ipos[b], atol=TOL,
+                                   err_msg=f"body_com[{name}]")
+    # joint limits per dof, actuators
+    lim = np.full((mj.nv, 2), [-np.inf, np.inf])
+    for j in range(mj.njnt):
+        if mj.jnt_limited[j]:
+            lim[mj.jnt_dofadr[j]] = mj.jnt_range[j]
+    np.testing.assert_allclose(uk.dof_range, lim, atol=TOL, err_msg="dof_range")
+    np.testing.assert_allclose(uk.actuator_gear, mj.actuator_gear[:, 0], rtol=TOL)
+    ctrl = np.where(mj.actuator_ctrllimited[:, None] > 0, mj.actuator_ctrlrange,
+                    [-np.inf, np.inf])
+    np.testing.assert_allclose(uk.actuator_ctrlrange, ctrl, atol=TOL)
+    # kinematics at qpos0, keyframes and random configurations
+    compare_kinematics(uk, mj, mj.qpos0, "qpos0")
+    assert uk.keyframe_names == [mj.key(k).name for k in range(mj.nkey)]
+    for k in range(mj.nkey):
+        state = uk.make_state(key=mj.key(k).name)
+        np.testing.assert_allclose(state.qpos, mj.key_qpos[k], atol=1e-9)
+        compare_kinematics(uk, mj, mj.key_qpos[k], f"key {mj.key(k).name}")
+    rng = np.random.default_rng(0)
+    for trial in range(5):
+        q = random_qpos(mj, rng)
+        state = compare_kinematics(uk, mj, q, f"random qpos {trial}")
+        # hinge/slide coordinates come back exactly (quaternions up to sign)
+        for j in range(mj.njnt):
+            a = mj.jnt_qposadr[j]
+            if mj.jnt_type[j] in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+                assert abs(state.qpos[a] - q[a]) < 1e-8, f"qpos[{a}] ({mj.joint(j).name})"
+    return uk, mj
+
+
+@pytest.mark.parametrize("name", GYM)
+def test_gymnasium_asset_matches_mujoco(name):
+    check_against_mujoco(ukemi.gymnasium_asset_path(name))
+
+
+@pytest.mark.parametrize("name", ["a1", "humanoid", "panda", "x2"])
+def test_shared_model(name):
+    path = SHARED / f"{name}.xml"
+    if not path.exists():
+        pytest.skip(f"{path} is absent (shared models live beside the repository)")
+    if name in SHARED_UNSUPPORTED:
+        with pytest.raises(ukemi.UnsupportedError, match=re.escape(SHARED_UNSUPPORTED[name])):
+            load(path)
+        return
+    check_against_mujoco(path)
+
+
+def test_warnings_name_ignored_features():
+    with pytest.warns(UserWarning, match=r"viscosity.*no fluid forces"):
+        ukemi.Model.from_xml_path(str(ukemi.gymnasium_asset_path("swimmer")))
+
+
+def test_load_dispatches_on_suffix(tmp_path):
+    m = ukemi.load(ukemi.gymnasium_asset_path("inverted_pendulum"))
+    assert m.nq == 2
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text("<robot/>")
+    with pytest.raises(ukemi.UnsupportedError):
+        ukemi.load(urdf)
+    with pytest.raises(ukemi.MjcfError, match="cannot read"):
+        ukemi.load(tmp_path / "missing.xml")
+
+
+PENDULUM = """
+<mujoco>
+  <option timestep="{h}" integrator="{integrator}"/>
+  <worldbody>
+    <body name="upper" pos="0 0 1">
+      <joint name="shoulder_x" type="hinge" axis="2 1 1"/>
+      <joint name="shoulder_y" type="hinge" axis="0 -1 1"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 -0.4" size="0.05"/>
+      <body name="lower" pos="0.3 0 -0.4">
+        <joint name="elbow" type="hinge" axis="0 1 0" ref="20" damping="0.05" armature="0.01"/>
+        <geom type="box" size="0.05 0.04 0.2" pos="0 0 -0.2" euler="10 20 30"/>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <motor joint="elbow" gear="2"/>
+    <position joint="shoulder_y" kp="3" kv="0.2"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def _mj_rollout(xml, q0, ctrl, seconds):
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    d.qpos[:] = q0
+    d.ctrl[:] = ctrl
+    for _ in range(round(seconds / m.opt.timestep)):
+        mujoco.mj_step(m, d)
+    return d.qpos.copy()
+
+
+def test_trajectory_converges_to_mujoco_as_dt_shrinks():
+    """Non-orthogonal composite shoulder + elbow with ref, damping, armature, a motor and a
+    position servo, no contact: |qpos_ukemi(1 s) - qpos_truth(1 s)| shrinks with dt, where the
+    truth is MuJoCo RK4 at dt = 1e-4."""
+    q0 = [0.3, -0.4, np.deg2rad(20) + 0.5]
+    ctrl = [0.2, 0.1]
+    truth = _mj_rollout(PENDULUM.format(h=1e-4, integrator="RK4"), q0, ctrl, 1.0)
+    rows = []
+    for h in (0.01, 0.005, 0.0025):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = ukemi.Model.from_xml_string(PENDULUM.format(h=h, integrator="Euler"))
+        state = m.make_state(qpos=q0)
+        traj = ukemi.rollout(m, state, ctrls=np.tile(ctrl, (round(1.0 / h), 1)))
+        err = np.abs(traj.qpos[-1] - truth).max()
+        mj_err = np.abs(_mj_rollout(PENDULUM.format(h=h, integrator="Euler"), q0, ctrl, 1.0)
+                        - truth).max()
+        rows.append((h, err, mj_err))
+    print("\n   dt      |ukemi - truth|   |mujoco Euler - truth|   (truth: MuJoCo RK4, dt=1e-4)")
+    for h, e, me in rows:
+        print(f"  {h:<8} {e:14.3e}   {me:14.3e}")
+    assert rows[0][1] < 0.05
+    # error shrinks with dt (the servo and joint forces are explicit: at least first order)
+    assert rows[1][1] < 0.6 * rows[0][1] and rows[2][1] < 0.6 * rows[1][1]
+
+
+def test_inverted_pendulum_free_swing_matches_mujoco():
+    path = ukemi.gymnasium_asset_path("inverted_pendulum")
+    xml = path.read_text()
+    q0 = [0.1, 0.4]
+    truth = _mj_rollout(xml.replace('integrator="RK4" timestep="0.02"',
+                                    'integrator="RK4" timestep="0.0001"'), q0, [0.3], 0.5)
+    errs = []
+    for h in (0.004, 0.002):
+        m = load(path).with_options(timestep=h)
+        traj = ukemi.rollout(m, m.make_state(qpos=q0), ctrls=np.tile([0.3], (round(0.5 / h), 1)))
+        errs.append(np.abs(traj.qpos[-1] - truth).max())
+    print(f"\ninverted_pendulum 0.5 s: |ukemi - MuJoCo RK4| = {errs[0]:.3e} (dt 0.004), "
+          f"{errs[1]:.3e} (dt 0.002)")
+    assert errs[0] < 2e-2 and errs[1] < 0.6 * errs[0]
+
+
+# --- malformed and unsupported input ---------------------------------------------------------
+
+BAD = [
+    ("<mujoco><worldbody><body><geom size='abc'/></body></worldbody></mujoco>", "geom", 1),
+    ("<mujoco>\n<worldbody>\n<body>\n<joint type='hinje'/>\n</body></worldbody></mujoco>", "joint", 4),
+    ("<mujoco><worldbody/><actuator><motor joint='nope'/></actuator></mujoco>", "motor", 1),
+    ("<mujoco><worldbody><body><geom size='0.1'/><joint range='1 0'/></body></worldbody></mujoco>",
+     "joint", 1),
+    ("<robot/>", "robot", 1),
+    ("<mujoco><worldbody><body>", "malformed", 1),
+    ("<mujoco>\n\n<worldbody><body><joint/></body></worldbody></mujoco>", "mass", 3),
+]
+
+
+@pytest.mark.parametrize("xml,what,line", BAD)
+def test_bad_xml_raises_mjcf_error_with_element_and_line(xml, what, line):
+    with pytest.raises(ukemi.MjcfError) as e:
+        ukemi.Model.from_xml_string(xml)
+    msg = str(e.value)
+    assert what in msg and f":{line}:" in msg, msg
+
+
+UNSUPPORTED = [
+    "<mujoco><asset><mesh name='m' vertex='0 0 0 1 0 0 0 1 0 0 0 1'/></asset><worldbody><body>"
+    "<joint/><geom type='mesh' mesh='m' mass='0'/><geom size='.1'/></body></worldbody></mujoco>",
+    "<mujoco><worldbody><body><joint pos='0 0 0'/><joint pos='1 0 0'/><geom size='.1'/></body>"
+    "</worldbody></mujoco>",
+    "<mujoco><worldbody><body><joint type='hinge'/><joint type='slide'/><geom size='.1'/></body>"
+    "</worldbody></mujoco>",
+    "<mujoco><worldbody><body><freejoint/><geom size='.1'/><site name='s'/></body></worldbody>"
+    "<actuator><motor site='s'/></actuator></mujoco>",
+]
+
+
+@pytest.mark.parametrize("xml", UNSUPPORTED)
+def test_unsupported_features_are_explicit(xml):
+    with pytest.raises(ukemi.UnsupportedError, match=r"MJCF <string>:\d+: <\w+"):
+        ukemi.Model.from_xml_string(xml)
+
+
+def test_visual_mesh_is_skipped():
+    xml = ("<mujoco><asset><mesh name='m' vertex='0 0 0 1 0 0 0 1 0 0 0 1'/></asset><worldbody>"
+           "<body><joint/><geom type='mesh' mesh='m' contype='0' conaffinity='0' density='0'/>"
+           "<geom size='.1'/></body></worldbody></mujoco>")
+    m = ukemi.Model.from_xml_string(xml)
+    assert m.ngeom == 1
+
+
+def test_fuzzed_gymnasium_files_raise_only_ukemi_errors():
+    rng = random.Random(1234)
+    texts = [ukemi.gymnasium_asset_path(n).read_text() for n in GYM]
+    garbage = ["abc", "nan", "inf", "-1", "", "1e400", "0", "1 2", "-5 5 5 5 5 5 5 5", "true"]
+    outcomes = {"loaded": 0, "error": 0}
+    for case in range(200):
+        text = rng.choice(texts)
+        attrs = list(re.finditer(r'(\w+)="([^"]*)"', text))
+        kind = rng.randrange(3)
+        if kind == 0 and attrs:
+            m = rng.choice(attrs)
+            text = text[:m.start()] + text[m.end():]
+        elif kind == 1 and attrs:
+            m = rng.choice(attrs)
+            text = text[:m.start(2)] + rng.choice(garbage) + text[m.end(2):]
+        else:
+            text = text[:rng.randrange(len(text))]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = ukemi.Model.from_xml_string(text)
+            model.make_state()
+            outcomes["loaded"] += 1
+        except ukemi.UkemiError as e:
+            assert not isinstance(e, ukemi.InternalError), f"case {case}: {e}"
+            outcomes["error"] += 1
+    assert outcomes["loaded"] > 0 and outcomes["error"] > 0, outcomes
