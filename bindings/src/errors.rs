@@ -11,6 +11,7 @@ pyo3::import_exception!(ukemi.errors, InputError);
 pyo3::import_exception!(ukemi.errors, ModelMismatchError);
 pyo3::import_exception!(ukemi.errors, UnsupportedError);
 pyo3::import_exception!(ukemi.errors, InternalError);
+pyo3::import_exception!(ukemi.errors, ConvergenceError);
 
 /// One exhaustive mapping: adding an engine variant does not compile until it is mapped here.
 pub fn to_py(e: Error) -> PyErr {
@@ -21,6 +22,7 @@ pub fn to_py(e: Error) -> PyErr {
         Error::InvalidInput { .. } => InputError::new_err(msg),
         Error::ModelMismatch { .. } => ModelMismatchError::new_err(msg),
         Error::Unsupported(_) => UnsupportedError::new_err(msg),
+        Error::NotConverged { .. } => ConvergenceError::new_err(msg),
     }
 }
 

@@ -79,7 +79,7 @@ fn fd_jacobians(
     let p0 = model.params();
     let mut c = DMatrix::zeros(ny, p0.len());
     for i in 0..p0.len() {
-        let e = eps * p0[i].abs().max(1e-2);
+        let e = eps * p0[i].abs().max(1.0);
         let (mut pp, mut pm) = (p0.clone(), p0.clone());
         pp[i] += e;
         pm[i] -= e;

@@ -347,7 +347,7 @@ impl Linearization {
         let (mut r_plus, mut y_plus) = (vec![0.0; self.w.len()], vec![0.0; ny]);
         for (col, input) in inputs.into_iter().enumerate() {
             let eps = match input {
-                Input::Param(p) => 1e-6 * model.param(p).abs().max(1e-2),
+                Input::Param(p) => 1e-6 * model.param(p).abs().max(1.0),
                 _ => FD_STEP,
             };
             for sign in [1.0, -1.0] {
