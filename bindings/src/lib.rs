@@ -1,5 +1,6 @@
 //! `ukemi._ukemi`: the Python extension. Registration only; see the sibling modules.
 mod errors;
+mod gradients;
 mod mjcf;
 mod model;
 mod state;
@@ -17,6 +18,14 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(step::step, m)?)?;
     m.add_function(wrap_pyfunction!(step::rollout, m)?)?;
     m.add_function(wrap_pyfunction!(step::signed_distances, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::step_jacobians, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::step_vjp, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::step_jvp, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::rollout_vjp_py, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::flat_step, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::flat_step_vjp, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::flat_rollout, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::flat_rollout_vjp, m)?)?;
     let kinds: Vec<&str> = ukemi_engine::JointKind::ALL
         .iter()
         .map(|k| k.name())

@@ -392,7 +392,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -405,6 +405,7 @@ impl PyModel {
         undercut: Option<f64>,
         warm_start: Option<bool>,
         regularization: Option<f64>,
+        kappa_grad: Option<f64>,
     ) -> PyResult<PyModel> {
         guard(|| {
             let mut o = self.inner.options.clone();
@@ -417,10 +418,41 @@ impl PyModel {
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);
             o.undercut = undercut.unwrap_or(o.undercut);
             o.warm_start = warm_start.unwrap_or(o.warm_start);
+            // kappa_grad = 0 selects the exact (unsmoothed) derivative
+            if let Some(k) = kappa_grad {
+                o.kappa_grad = if k == 0.0 { None } else { Some(k) };
+            }
             Ok(PyModel {
                 inner: Arc::new(self.inner.with_options(o).py()?),
             })
         })
+    }
+
+    /// Differentiable parameters as one flat vector (see `param_names`).
+    #[getter]
+    fn params<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<f64>> {
+        numpy::PyArray1::from_vec(py, self.inner.params())
+    }
+
+    /// One name per entry of `params`, e.g. `"body_mass[torso]"`.
+    #[getter]
+    fn param_names(&self) -> Vec<String> {
+        self.inner.param_names()
+    }
+
+    /// The same model with new parameter values (same topology: states stay valid).
+    fn with_params(&self, params: Vec<f64>) -> PyResult<PyModel> {
+        guard(|| {
+            Ok(PyModel {
+                inner: Arc::new(self.inner.with_params(&params).py()?),
+            })
+        })
+    }
+
+    /// Default central-path parameter of the gradients (None: exact derivative).
+    #[getter]
+    fn kappa_grad(&self) -> Option<f64> {
+        self.inner.options.kappa_grad
     }
 
     /// State at the reference pose, or at the given minimal coordinates.

@@ -54,6 +54,24 @@ pub enum Error {
         /// What is wrong: element, attribute and bad value.
         msg: String,
     },
+    /// A solve that a result depends on (a gradient's step or its central-path point) did not
+    /// converge, so no valid result exists.
+    #[error(
+        "{context} did not converge: {status} after {iterations} iterations \
+         (residual {residual:e}, complementarity {complementarity:e})"
+    )]
+    NotConverged {
+        /// What was being solved.
+        context: String,
+        /// Solver status name.
+        status: String,
+        /// Iterations used.
+        iterations: usize,
+        /// Final residual ∞-norm.
+        residual: f64,
+        /// Final complementarity violation.
+        complementarity: f64,
+    },
 }
 
 /// Result alias of the engine.

@@ -27,6 +27,7 @@
 
 pub mod contact;
 pub mod error;
+pub mod gradients;
 pub mod integrator;
 pub mod joints;
 pub mod math;
@@ -40,6 +41,7 @@ pub mod step;
 pub use contact::ContactModel;
 pub use contact::geometry::Shape;
 pub use error::{Error, Result};
+pub use gradients::{Adjoints, Coordinates, Jacobians, Linearization, Wrt, step_smoothed};
 pub use joints::coordinates::{qpos, qvel, set_minimal};
 pub use joints::{Joint, JointKind};
 pub use model::{

@@ -19,6 +19,7 @@ from __future__ import annotations
 from . import _ukemi
 from ._builder import JOINT_KINDS, ModelBuilder
 from ._loaders import gymnasium_asset_path, load
+from ._gradients import StepJacobians, rollout_vjp, step_jacobians, step_jvp, step_vjp
 from ._simulate import STATUS_NAMES, Trajectory, rollout, signed_distances, step
 from ._ukemi import Model, State, StepInfo
 from .errors import (
@@ -49,12 +50,28 @@ __all__ = [
     "ShapeError",
     "State",
     "StepInfo",
+    "StepJacobians",
     "Trajectory",
     "UkemiError",
     "UnsupportedError",
     "gymnasium_asset_path",
     "load",
     "rollout",
+    "rollout_vjp",
     "signed_distances",
     "step",
+    "step_jacobians",
+    "step_jvp",
+    "step_vjp",
 ]
+
+# Framework layers import their framework: load them on first access (`ukemi.jax.step`).
+_LAZY = ("jax", "torch")
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'ukemi' has no attribute {name!r}")

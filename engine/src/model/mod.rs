@@ -2,6 +2,7 @@
 //! Drake's finalized plant). Per-rollout data lives in [`crate::State`].
 mod builder;
 mod options;
+pub(crate) mod params;
 mod topology;
 
 pub use builder::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, ModelBuilder};

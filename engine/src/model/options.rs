@@ -36,6 +36,10 @@ pub struct Options {
     /// Regularisation `ε` on constraint pivots, `-ε I`: keeps redundant constraints of closed
     /// loops (a planar four-bar in 3-D) solvable without changing the solution. Default 1e-12.
     pub regularization: f64,
+    /// Central-path parameter at which gradients are taken (`None`: the exact derivative at the
+    /// simulated solution). The step itself is always solved to `kappa_tol`; see
+    /// [`crate::gradients`]. Default `None`.
+    pub kappa_grad: Option<f64>,
 }
 
 impl Default for Options {
@@ -53,6 +57,7 @@ impl Default for Options {
             warm_start_margin: 1e-6,
             tau_min: 0.95,
             tau_max: 0.99,
+            kappa_grad: None,
         }
     }
 }
@@ -85,6 +90,12 @@ impl Options {
                 "must be finite and >= 0"
             )
         );
+        if let Some(k) = self.kappa_grad {
+            ensure!(
+                k.is_finite() && k > 0.0,
+                Error::model("kappa_grad", k, "must be finite and > 0 (or None)")
+            );
+        }
         Ok(())
     }
 }

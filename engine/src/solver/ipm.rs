@@ -20,8 +20,24 @@ const TAU_CAP: f64 = 1.0 - 1e-6;
 
 /// Run the interior-point method from the prepared iterate.
 pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
+    solve_to(model, state, ws, None)
+}
+
+/// Largest entry of the centred residual `r(w, κ)` left in `ws.residual` by `evaluate`.
+fn centred_norm(ws: &Workspace) -> f64 {
+    ws.residual.iter().fold(
+        0.0f64,
+        |m, r| if r.is_nan() { f64::NAN } else { m.max(r.abs()) },
+    )
+}
+
+/// The interior-point loop. `central = None` drives complementarity to `kappa_tol` (the hard
+/// step); `Some(κ)` stops on the central path at κ: centering never targets below κ, and the
+/// solve has converged when the centred residual `r(w, κ)` is below `rtol`.
+fn solve_to(model: &Model, state: &State, ws: &mut Workspace, central: Option<f64>) -> StepReport {
     let o = &model.options;
     let p = &model.topology.pattern;
+    let floor = central.unwrap_or(o.kappa_tol / o.undercut);
     let mut vio = evaluate(model, state, ws, false, 0.0);
     let mut report = StepReport {
         status: SolveStatus::MaxIterations,
@@ -34,7 +50,16 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             report.status = SolveStatus::NonFinite;
             break;
         }
-        if vio.r < o.rtol && vio.k < o.kappa_tol {
+        let done = match central {
+            None => vio.r < o.rtol && vio.k < o.kappa_tol,
+            Some(k) => {
+                evaluate(model, state, ws, false, k);
+                let c = centred_norm(ws);
+                evaluate(model, state, ws, false, 0.0);
+                c < o.rtol
+            }
+        };
+        if done {
             report.status = SolveStatus::Converged;
             break;
         }
@@ -53,7 +78,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
         let mu = mean_complementarity(model, &ws.w, &ws.delta_aff, 0.0);
         let mu_aff = mean_complementarity(model, &ws.w, &ws.delta_aff, alpha_aff);
         let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
-        let kappa = (sigma * mu).max(o.kappa_tol / o.undercut);
+        let kappa = (sigma * mu).max(floor);
         // corrector: Δ = -R⁻¹ (r(w, κ) + Δb_aff ∘ Δc_aff), reusing the factorisation
         evaluate(model, state, ws, false, kappa);
         let merit = norm2(&ws.residual);
@@ -77,12 +102,17 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             report.status = SolveStatus::LineSearchFailed;
             break;
         }
-        if it + 1 == o.max_iter && vio.r < o.rtol && vio.k < o.kappa_tol {
+        if it + 1 == o.max_iter && central.is_none() && vio.r < o.rtol && vio.k < o.kappa_tol {
             report.status = SolveStatus::Converged;
         }
     }
     report.residual = vio.r;
     report.complementarity = vio.k;
+    if let Some(k) = central {
+        evaluate(model, state, ws, false, k);
+        report.residual = centred_norm(ws);
+        report.complementarity = k;
+    }
     report
 }
 
@@ -139,4 +169,19 @@ fn line_search(
         alpha *= 0.5;
     }
     None
+}
+
+/// The central-path point at `kappa` of the prepared step: the interior solution of the relaxed
+/// problem (every complementarity pair at `b ∘ c = κ e`), the smoothed step of the gradients
+/// (`kappa_grad`). Solved by the same predictor-corrector iteration from the neutral interior
+/// point with centering floored at κ: approaching κ from above stays well inside the cones,
+/// which Newton's method started from the (boundary-hugging) hard solution does not.
+pub(crate) fn solve_central(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    kappa: f64,
+) -> StepReport {
+    super::inequality::initialize(model, state, ws, false);
+    solve_to(model, state, ws, Some(kappa))
 }

@@ -50,8 +50,9 @@ fn pose(state: &State, b: usize) -> Pose {
     if b == 0 { Pose::world() } else { state.pose(b) }
 }
 
-/// Evaluate applied impulses and current-configuration Jacobians; set the initial iterate.
-pub(crate) fn prepare(
+/// Everything of a step that depends on the current state, controls and forces but not on the
+/// iterate: applied impulses, current-configuration joint, free and contact Jacobians.
+pub(crate) fn prepare_forces(
     model: &Model,
     state: &State,
     ws: &mut Workspace,
@@ -93,6 +94,20 @@ pub(crate) fn prepare(
             add_jt_times(&mut ws.applied, joint, jf, &tau[..nf], h);
         }
     }
+    if model.topology.has_cones {
+        super::inequality::prepare(model, state, ws);
+    }
+}
+
+/// Evaluate applied impulses and current-configuration Jacobians; set the initial iterate.
+pub(crate) fn prepare(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+) {
+    prepare_forces(model, state, ws, ctrl, forces);
     // initial iterate: previous velocities and impulses (warm start)
     for b in 1..model.nbody() {
         let o = body_slot(model, b);
@@ -108,7 +123,6 @@ pub(crate) fn prepare(
         }
     }
     if model.topology.has_cones {
-        super::inequality::prepare(model, state, ws);
         super::inequality::initialize(model, state, ws, model.options.warm_start);
     }
 }
@@ -209,7 +223,7 @@ pub(crate) fn evaluate(
     v
 }
 
-fn evaluate_in(
+pub(crate) fn evaluate_in(
     model: &Model,
     state: &State,
     ws: &mut Workspace,

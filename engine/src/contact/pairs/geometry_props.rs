@@ -74,15 +74,25 @@ fn unique_witness(f: &Feature, w: &Witness, pa: &GeomPose, pb: &GeomPose) -> boo
     }
 }
 
-/// A point inside a box has a unique nearest face (outside the witness is always unique).
+/// Whether φ of a point against a box is smooth around the point, with a margin.
+///
+/// Inside, φ = −(least depth) is piecewise linear: the nearest face must be unique. Outside, the
+/// witness is unique but the distance `d` to the clamped point is only C¹: its Hessian is zero
+/// in the face regions, of norm 1/d in the edge and corner regions, and jumps where `|q_k| = h_k`
+/// on some axis. The envelope-theorem derivative holds there too, but a central difference of
+/// step ε that straddles such a boundary is off by up to ~ε/(2d) (2e-6 against the check's 1e-6
+/// tolerance for d ≈ 2 mm, as seen on box–box corners), so every axis must be clear of its
+/// region boundary by the margin, which also keeps d above the margin (as the sphere features
+/// require of their centre distances).
 fn box_unique(point: &Vector3<f64>, half: &Vector3<f64>, pose_box: &GeomPose) -> bool {
+    let margin = 1e-2;
     let q = pose_box.rot.transpose() * (point - pose_box.pos);
     let mut depths: Vec<f64> = (0..3).map(|k| half[k] - q[k].abs()).collect();
     if depths.iter().any(|d| *d < 0.0) {
-        return true;
+        return depths.iter().all(|d| d.abs() > margin);
     }
     depths.sort_by(f64::total_cmp);
-    depths[1] - depths[0] > 1e-2
+    depths[1] - depths[0] > margin
 }
 
 /// Central finite differences of φ under the 12 unit rigid motions against the envelope

@@ -1,0 +1,200 @@
+//! Flat minimal-state functions for array frameworks (JAX, PyTorch): the state is
+//! `x = [qpos, qvel]` (length `nq + nv`, quaternions as 4 raw numbers), so an adjoint of `x` is
+//! a plain array of the same shape. Batched versions run the batch in parallel (rayon).
+//!
+//! A flat state carries no solver warm start, so every flat step starts the contact solve from
+//! the neutral point; [`rollout`] chains full states internally and keeps the warm start.
+use rayon::prelude::*;
+
+use super::rollout::{advance, rollout_vjp_with};
+use super::tangent::{Coordinates, qpos_adjoint_from_tangent, tangent_adjoint_from_qpos};
+use super::{Linearization, Wrt};
+use crate::joints::coordinates::{qpos_into, qvel_into, set_minimal};
+use crate::model::Model;
+use crate::state::{State, Workspace};
+use crate::{Error, Result, ensure};
+
+/// Length of a flat state.
+pub fn nx(model: &Model) -> usize {
+    model.nq + model.nv
+}
+
+/// The full state of a flat `x` (reference warm start).
+pub fn state_of(model: &Model, x: &[f64]) -> Result<State> {
+    ensure!(
+        x.len() == nx(model),
+        Error::shape("x", &[nx(model)], &[x.len()])
+    );
+    let mut s = State::reference(model);
+    set_minimal(model, &mut s, &x[..model.nq], &x[model.nq..])?;
+    Ok(s)
+}
+
+/// `[qpos, qvel]` of a state.
+pub fn flat_of(model: &Model, state: &State, out: &mut [f64]) {
+    let (q, v) = out.split_at_mut(model.nq);
+    qpos_into(model, state, q);
+    qvel_into(model, state, v);
+}
+
+/// One step of a flat state. Errors (including non-convergence) name the failure.
+pub fn step(model: &Model, x: &[f64], u: &[f64]) -> Result<Vec<f64>> {
+    let s = state_of(model, x)?;
+    let mut ws = Workspace::new(model);
+    let next = advance(model, &s, u, Coordinates::Minimal, &mut ws)?;
+    let mut out = vec![0.0; nx(model)];
+    flat_of(model, &next, &mut out);
+    Ok(out)
+}
+
+/// Adjoints `(x, u, params)` of one flat step given the adjoint of its output.
+pub fn step_vjp(
+    model: &Model,
+    x: &[f64],
+    u: &[f64],
+    adj_next: &[f64],
+    kappa_grad: Option<f64>,
+    with_params: bool,
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    let (nq, nv) = (model.nq, model.nv);
+    ensure!(
+        adj_next.len() == nq + nv,
+        Error::shape("adjoint_next", &[nq + nv], &[adj_next.len()])
+    );
+    let s = state_of(model, x)?;
+    let wrt = Wrt {
+        state: true,
+        ctrl: true,
+        params: with_params,
+    };
+    let mut lin = Linearization::new(model, &s, u, Coordinates::Minimal, wrt, kappa_grad)?;
+    let mut qpos_next = vec![0.0; nq];
+    qpos_into(model, lin.next_state(), &mut qpos_next);
+    let mut adj_t = vec![0.0; 2 * nv];
+    tangent_adjoint_from_qpos(model, &qpos_next, &adj_next[..nq], &mut adj_t[..nv]);
+    adj_t[nv..].copy_from_slice(&adj_next[nq..]);
+    let a = lin.vjp(model, &adj_t)?;
+    let mut adj_x = vec![0.0; nq + nv];
+    qpos_adjoint_from_tangent(model, &x[..nq], &a.state[..nv], &mut adj_x[..nq]);
+    adj_x[nq..].copy_from_slice(&a.state[nv..]);
+    Ok((adj_x, a.ctrl, a.params))
+}
+
+/// A rollout of `nstep` steps from flat `x0`: `(T+1, nq+nv)` row-major.
+pub fn rollout(model: &Model, x0: &[f64], us: &[f64], nstep: usize) -> Result<Vec<f64>> {
+    let nu = model.nu();
+    ensure!(
+        us.len() == nstep * nu,
+        Error::shape("us", &[nstep, nu], &[us.len() / nu.max(1), nu])
+    );
+    let n = nx(model);
+    let mut out = vec![0.0; (nstep + 1) * n];
+    let mut s = state_of(model, x0)?;
+    let mut ws = Workspace::new(model);
+    flat_of(model, &s, &mut out[..n]);
+    for k in 0..nstep {
+        s = advance(
+            model,
+            &s,
+            &us[k * nu..(k + 1) * nu],
+            Coordinates::Minimal,
+            &mut ws,
+        )
+        .map_err(|e| match e {
+            Error::NotConverged {
+                context,
+                status,
+                iterations,
+                residual,
+                complementarity,
+            } => Error::NotConverged {
+                context: format!("{context} (step {k})"),
+                status,
+                iterations,
+                residual,
+                complementarity,
+            },
+            other => other,
+        })?;
+        flat_of(model, &s, &mut out[(k + 1) * n..(k + 2) * n]);
+    }
+    Ok(out)
+}
+
+/// Adjoints `(x0, us, params)` of a flat rollout given `adj_xs` (`(T+1, nq+nv)` row-major).
+pub fn rollout_vjp(
+    model: &Model,
+    x0: &[f64],
+    us: &[f64],
+    nstep: usize,
+    adj_xs: &[f64],
+    kappa_grad: Option<f64>,
+    with_params: bool,
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    let (nq, nv, n) = (model.nq, model.nv, nx(model));
+    ensure!(
+        adj_xs.len() == (nstep + 1) * n,
+        Error::shape("adjoint_xs", &[nstep + 1, n], &[adj_xs.len() / n, n])
+    );
+    let s0 = state_of(model, x0)?;
+    let adjoint = |k: usize, s: &State, out: &mut [f64]| {
+        let mut q = vec![0.0; nq];
+        qpos_into(model, s, &mut q);
+        let a = &adj_xs[k * n..(k + 1) * n];
+        tangent_adjoint_from_qpos(model, &q, &a[..nq], &mut out[..nv]);
+        out[nv..].copy_from_slice(&a[nq..]);
+    };
+    let (adj, _) = rollout_vjp_with(
+        model,
+        &s0,
+        us,
+        nstep,
+        Coordinates::Minimal,
+        kappa_grad,
+        with_params,
+        &adjoint,
+    )?;
+    let mut adj_x = vec![0.0; n];
+    qpos_adjoint_from_tangent(model, &x0[..nq], &adj.state0[..nv], &mut adj_x[..nq]);
+    adj_x[nq..].copy_from_slice(&adj.state0[nv..]);
+    Ok((adj_x, adj.ctrls, adj.params))
+}
+
+/// Apply `f` to each batch element in parallel; `models` has one model or one per element.
+/// The first error wins (with its batch index).
+pub fn batched<T: Send>(
+    models: &[Model],
+    batch: usize,
+    f: impl Fn(&Model, usize) -> Result<T> + Sync,
+) -> Result<Vec<T>> {
+    ensure!(
+        models.len() == 1 || models.len() == batch,
+        Error::shape("params", &[batch], &[models.len()])
+    );
+    (0..batch)
+        .into_par_iter()
+        .map(|i| {
+            let m = if models.len() == 1 {
+                &models[0]
+            } else {
+                &models[i]
+            };
+            f(m, i).map_err(|e| match e {
+                Error::NotConverged {
+                    context,
+                    status,
+                    iterations,
+                    residual,
+                    complementarity,
+                } => Error::NotConverged {
+                    context: format!("{context} (batch element {i})"),
+                    status,
+                    iterations,
+                    residual,
+                    complementarity,
+                },
+                other => other,
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,393 @@
+//! Implicit gradients against central finite differences of the engine's own step.
+//!
+//! Away from contact the step map is smooth and the Jacobians must match finite differences of
+//! `step` to 1e-6 relative. Through contact they must match finite differences of the smoothed
+//! step (`step_smoothed` at the same κ). Products (VJP, JVP) must equal the Jacobian products.
+mod common;
+#[path = "common/contact.rs"]
+mod contact_scenes;
+
+use nalgebra::DMatrix;
+use proptest::prelude::*;
+use ukemi_engine::gradients::tangent::{difference, perturb};
+use ukemi_engine::{
+    ActuatorSpec, BodySpec, ContactModel, Coordinates, JointKind, JointSpec, Linearization, Model,
+    ModelBuilder, Shape, State, Workspace, Wrt, step, step_smoothed,
+};
+
+/// Tight solves so finite differences of the step are accurate.
+fn tight(model: Model) -> Model {
+    let mut o = model.options.clone();
+    o.rtol = 1e-14;
+    o.max_iter = 100;
+    model.with_options(o).unwrap()
+}
+
+/// The step map as the gradients see it: hard, or smoothed at `kappa`.
+fn step_map(model: &Model, state: &State, ctrl: &[f64], kappa: Option<f64>) -> State {
+    let mut s = state.clone();
+    match kappa {
+        Some(k) => {
+            step_smoothed(model, &mut s, ctrl, k).unwrap();
+        }
+        None => {
+            let mut ws = Workspace::new(model);
+            let r = step(model, &mut s, &mut ws, ctrl).unwrap();
+            assert_eq!(r.status.name(), "converged");
+        }
+    }
+    s
+}
+
+/// Central-difference Jacobians `(A, B, C)` of the (smoothed) step in `coords`.
+fn fd_jacobians(
+    model: &Model,
+    state: &State,
+    ctrl: &[f64],
+    coords: Coordinates,
+    kappa: Option<f64>,
+    eps: f64,
+) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+    let ny = coords.dim(model);
+    let base_in = perturb(model, state, coords, &vec![0.0; ny], 0.0).unwrap();
+    let base_out = step_map(model, &base_in, ctrl, kappa);
+    let out = |m: &Model, s: &State, u: &[f64]| {
+        let next = step_map(m, s, u, kappa);
+        nalgebra::DVector::from_vec(difference(m, &base_out, &next, coords).unwrap())
+    };
+    let mut a = DMatrix::zeros(ny, ny);
+    for i in 0..ny {
+        let mut dir = vec![0.0; ny];
+        dir[i] = 1.0;
+        let sp = perturb(model, &base_in, coords, &dir, eps).unwrap();
+        let sm = perturb(model, &base_in, coords, &dir, -eps).unwrap();
+        a.set_column(
+            i,
+            &((out(model, &sp, ctrl) - out(model, &sm, ctrl)) / (2.0 * eps)),
+        );
+    }
+    let mut b = DMatrix::zeros(ny, ctrl.len());
+    for i in 0..ctrl.len() {
+        let (mut up, mut um) = (ctrl.to_vec(), ctrl.to_vec());
+        up[i] += eps;
+        um[i] -= eps;
+        b.set_column(
+            i,
+            &((out(model, &base_in, &up) - out(model, &base_in, &um)) / (2.0 * eps)),
+        );
+    }
+    let p0 = model.params();
+    let mut c = DMatrix::zeros(ny, p0.len());
+    for i in 0..p0.len() {
+        let e = eps * p0[i].abs().max(1.0);
+        let (mut pp, mut pm) = (p0.clone(), p0.clone());
+        pp[i] += e;
+        pm[i] -= e;
+        let mp = model.with_params(&pp).unwrap();
+        // parameters at a bound (zero damping) get a one-sided difference
+        let col = match model.with_params(&pm) {
+            Ok(mm) => (out(&mp, &base_in, ctrl) - out(&mm, &base_in, ctrl)) / (2.0 * e),
+            Err(_) => (out(&mp, &base_in, ctrl) - out(model, &base_in, ctrl)) / e,
+        };
+        c.set_column(i, &col);
+    }
+    (a, b, c)
+}
+
+fn rel_err(x: &DMatrix<f64>, y: &DMatrix<f64>) -> f64 {
+    let scale = y.amax().max(1.0);
+    (x - y).amax() / scale
+}
+
+/// Check A, B, C against finite differences, and VJP/JVP against the Jacobian products.
+fn check(
+    model: &Model,
+    state: &State,
+    ctrl: &[f64],
+    coords: Coordinates,
+    kappa: Option<f64>,
+    tol: f64,
+) -> f64 {
+    let mut lin = Linearization::new(model, state, ctrl, coords, Wrt::ALL, kappa).unwrap();
+    let jac = lin.jacobians(model).unwrap();
+    let (a, b, c) = fd_jacobians(model, state, ctrl, coords, kappa, 1e-6);
+    let (ea, eb, ec) = (
+        rel_err(&jac.a, &a),
+        rel_err(&jac.b, &b),
+        rel_err(&jac.c, &c),
+    );
+    let names = model.param_names();
+    if ec > tol {
+        for (j, name) in names.iter().enumerate() {
+            let e = (jac.c.column(j) - c.column(j)).amax();
+            if e > tol * c.amax().max(1.0) {
+                eprintln!("param {name} err {e:e}");
+            }
+        }
+    }
+    assert!(ea < tol, "A: {ea:e}\nengine {:.6}\nfd {:.6}", jac.a, a);
+    assert!(eb < tol, "B: {eb:e}\nengine {:.6}\nfd {:.6}", jac.b, b);
+    assert!(ec < tol, "C: {ec:e}");
+    // products equal the Jacobian products
+    let ny = coords.dim(model);
+    let adj: Vec<f64> = (0..ny)
+        .map(|i| ((i * 7 + 3) % 11) as f64 / 11.0 - 0.4)
+        .collect();
+    let vjp = lin.vjp(model, &adj).unwrap();
+    let adjv = nalgebra::DVector::from_vec(adj);
+    let scale = |m: &DMatrix<f64>| m.amax().max(1.0);
+    let d_state = (jac.a.transpose() * &adjv - nalgebra::DVector::from_vec(vjp.state)).amax();
+    let d_ctrl = (jac.b.transpose() * &adjv - nalgebra::DVector::from_vec(vjp.ctrl)).amax();
+    let d_par = (jac.c.transpose() * &adjv - nalgebra::DVector::from_vec(vjp.params)).amax();
+    assert!(
+        d_state < 1e-10 * scale(&jac.a) * ny as f64,
+        "vjp state {d_state:e}"
+    );
+    assert!(
+        d_ctrl < 1e-10 * scale(&jac.b) * ny as f64,
+        "vjp ctrl {d_ctrl:e}"
+    );
+    assert!(
+        d_par < 1e-10 * scale(&jac.c) * ny as f64,
+        "vjp params {d_par:e}"
+    );
+    let dx: Vec<f64> = (0..ny)
+        .map(|i| ((i * 5 + 1) % 7) as f64 / 7.0 - 0.5)
+        .collect();
+    let du = vec![0.3; ctrl.len()];
+    let dp = vec![0.0; model.params().len()];
+    let jvp = lin.jvp(model, &dx, &du, &dp).unwrap();
+    let expect =
+        &jac.a * nalgebra::DVector::from_vec(dx) + &jac.b * nalgebra::DVector::from_vec(du);
+    let d_jvp = (expect - nalgebra::DVector::from_vec(jvp)).amax();
+    assert!(d_jvp < 1e-10 * scale(&jac.a) * ny as f64, "jvp {d_jvp:e}");
+    ea.max(eb).max(ec)
+}
+
+/// Double pendulum with springs, dampers and motors.
+fn double_pendulum() -> Model {
+    let mut b = ModelBuilder::new().timestep(0.01);
+    b = b
+        .body(BodySpec::new("l1", 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5]))
+        .body(BodySpec::new("l2", 0.7, [0.05, 0.06, 0.01]).pos([0.0, 0.0, -1.5]))
+        .joint(
+            JointSpec::new("j1", JointKind::Revolute, "world", "l1")
+                .axis([0.0, 1.0, 0.0])
+                .anchors([0.0; 3], [0.0, 0.0, 0.5])
+                .stiffness(2.0)
+                .damping(0.3),
+        )
+        .joint(
+            JointSpec::new("j2", JointKind::Revolute, "l1", "l2")
+                .axis([0.0, 1.0, 0.0])
+                .anchors([0.0, 0.0, -0.5], [0.0, 0.0, 0.5])
+                .damping(0.1),
+        );
+    // a motor on j1 and a position servo (gain kp, bias -kp q - kv q̇) on j2
+    let mut motor = ActuatorSpec::motor("m0", "j1", 0, 1.5);
+    motor.ctrlrange = Some((-5.0, 5.0));
+    let mut servo = ActuatorSpec::motor("m1", "j2", 0, 1.0);
+    servo.gain = 3.0;
+    servo.bias = [0.0, -3.0, -0.5];
+    b = b.actuator(motor).actuator(servo);
+    tight(b.compile().unwrap())
+}
+
+fn moving_state(model: &Model, qpos: &[f64], qvel: &[f64]) -> State {
+    let mut s = State::reference(model);
+    ukemi_engine::set_minimal(model, &mut s, qpos, qvel).unwrap();
+    s
+}
+
+#[test]
+fn double_pendulum_jacobians_match_finite_differences() {
+    let m = double_pendulum();
+    let s = moving_state(&m, &[0.4, -0.7], &[1.3, -2.1]);
+    for coords in [Coordinates::Minimal, Coordinates::Maximal] {
+        let e = check(&m, &s, &[0.7, -1.2], coords, None, 1e-6);
+        eprintln!("double pendulum {coords:?}: max rel err {e:e}");
+    }
+}
+
+/// A floating base carrying one joint of `kind`: every joint kind, random states.
+fn floating_with(kind: JointKind) -> Model {
+    let b = ModelBuilder::new()
+        .timestep(0.01)
+        .body(BodySpec::new("base", 2.0, [0.2, 0.3, 0.25]).pos([0.0, 0.0, 1.0]))
+        .body(BodySpec::new("arm", 0.8, [0.05, 0.04, 0.03]).pos([0.3, 0.0, 1.0]))
+        .joint(JointSpec::new("root", JointKind::Floating, "world", "base"))
+        .joint(
+            JointSpec::new("j", kind, "base", "arm")
+                .axis([0.3, 0.2, 1.0])
+                .anchors([0.15, 0.0, 0.0], [-0.15, 0.0, 0.0])
+                .stiffness(1.5)
+                .damping(0.2),
+        );
+    tight(b.compile().unwrap())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 16, .. ProptestConfig::default() })]
+    #[test]
+    fn every_joint_kind_matches_finite_differences_in_the_air(
+        k in 0usize..16,
+        seed in prop::collection::vec(-1.0f64..1.0, 32),
+    ) {
+        let kind = JointKind::ALL[k];
+        let m = floating_with(kind);
+        let mut qpos = m.qpos0.clone();
+        let nv = m.nv;
+        let dq: Vec<f64> = (0..nv).map(|i| 0.3 * seed[i % 32]).collect();
+        ukemi_engine::gradients::tangent::integrate_qpos(&m, &mut qpos, &dq);
+        let qvel: Vec<f64> = (0..nv).map(|i| 2.0 * seed[(i + 11) % 32]).collect();
+        let s = moving_state(&m, &qpos, &qvel);
+        for coords in [Coordinates::Minimal, Coordinates::Maximal] {
+            check(&m, &s, &[], coords, None, 1e-6);
+        }
+    }
+}
+
+/// A ball of radius 0.1 resting or sliding on the floor.
+fn ball_on_floor(model: ContactModel, mu: f64) -> Model {
+    let b = contact_scenes::floor(ModelBuilder::new().timestep(0.01), mu);
+    let b = contact_scenes::free_body(
+        b,
+        "ball",
+        1.0,
+        Shape::Sphere { radius: 0.1 },
+        [0.0, 0.0, 0.1],
+        [1.0, 0.0, 0.0, 0.0],
+        mu,
+        model,
+    );
+    tight(b.compile().unwrap())
+}
+
+fn settled(model: &Model, qvel: &[f64]) -> State {
+    // settle on the floor, then give it a velocity
+    let mut s = State::reference(model);
+    let mut ws = Workspace::new(model);
+    for _ in 0..20 {
+        step(model, &mut s, &mut ws, &[]).unwrap();
+    }
+    let q = ukemi_engine::qpos(model, &s);
+    let mut out = s.clone();
+    ukemi_engine::set_minimal(model, &mut out, &q, qvel).unwrap();
+    out
+}
+
+#[test]
+fn contact_jacobians_match_the_smoothed_step_for_every_contact_model() {
+    for (cm, v) in [
+        (ContactModel::Nonlinear, [0.5, 0.2, -0.1, 0.0, 0.0, 1.0]),
+        (ContactModel::Linear, [0.5, 0.0, -0.1, 0.0, 0.0, 0.0]),
+        (ContactModel::Impact, [0.5, 0.2, -0.3, 1.0, 0.0, 0.0]),
+    ] {
+        let m = ball_on_floor(cm, 0.3);
+        let s = settled(&m, &v);
+        for kappa in [1e-3, 1e-5] {
+            let e = check(&m, &s, &[], Coordinates::Minimal, Some(kappa), 1e-5);
+            eprintln!("{cm:?} kappa {kappa:e}: max rel err {e:e}");
+        }
+    }
+}
+
+#[test]
+fn joint_limit_jacobians_match_the_smoothed_step() {
+    let b = ModelBuilder::new()
+        .timestep(0.01)
+        .body(BodySpec::new("l1", 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5]))
+        .joint({
+            let mut j = JointSpec::new("j1", JointKind::Revolute, "world", "l1")
+                .axis([0.0, 1.0, 0.0])
+                .anchors([0.0; 3], [0.0, 0.0, 0.5]);
+            j.range = Some(vec![(-0.3, 0.3)]);
+            j
+        });
+    let m = tight(b.compile().unwrap());
+    // pressed against the upper limit
+    let s = moving_state(&m, &[0.29], &[2.0]);
+    let e = check(&m, &s, &[], Coordinates::Minimal, Some(1e-4), 1e-5);
+    eprintln!("limit: max rel err {e:e}");
+}
+
+#[test]
+fn a_failed_step_gives_no_gradient() {
+    let m0 = ball_on_floor(ContactModel::Nonlinear, 0.5);
+    let s = settled(&m0, &[0.0, 0.0, -3.0, 0.0, 0.0, 0.0]);
+    let mut o = m0.options.clone();
+    o.max_iter = 1;
+    let m = m0.with_options(o).unwrap();
+    let err = Linearization::new(&m, &s, &[], Coordinates::Minimal, Wrt::ALL, Some(1e-4));
+    let msg = err.err().expect("must fail").to_string();
+    assert!(msg.contains("did not converge"), "{msg}");
+}
+
+#[test]
+fn rollout_vjp_equals_chained_jacobian_transposes() {
+    use ukemi_engine::gradients::rollout_vjp;
+    let m = double_pendulum();
+    let s0 = moving_state(&m, &[0.4, -0.7], &[1.3, -2.1]);
+    let (t, ny, nu) = (6, 2 * m.nv, m.nu());
+    let ctrls: Vec<f64> = (0..t * nu).map(|i| (i as f64 * 0.37).sin()).collect();
+    let adj: Vec<f64> = (0..(t + 1) * ny).map(|i| (i as f64 * 0.91).cos()).collect();
+    let r = rollout_vjp(&m, &s0, &ctrls, t, &adj, Coordinates::Minimal, None, true).unwrap();
+    // forward: Jacobians of every step along the same chain
+    let mut states = vec![s0.clone()];
+    let mut jacs = Vec::new();
+    for k in 0..t {
+        let u = &ctrls[k * nu..(k + 1) * nu];
+        let mut lin =
+            Linearization::new(&m, &states[k], u, Coordinates::Minimal, Wrt::ALL, None).unwrap();
+        jacs.push(lin.jacobians(&m).unwrap());
+        states.push(lin.next_state().clone());
+    }
+    let mut a = nalgebra::DVector::from_column_slice(&adj[t * ny..]);
+    let mut params = nalgebra::DVector::zeros(m.params().len());
+    for k in (0..t).rev() {
+        let g_u = jacs[k].b.transpose() * &a;
+        for i in 0..nu {
+            assert!((g_u[i] - r.ctrls[k * nu + i]).abs() < 1e-10 * g_u.amax().max(1.0));
+        }
+        params += jacs[k].c.transpose() * &a;
+        a = jacs[k].a.transpose() * &a
+            + nalgebra::DVector::from_column_slice(&adj[k * ny..(k + 1) * ny]);
+    }
+    let d0 = (a - nalgebra::DVector::from_vec(r.state0)).amax();
+    let dp = (params.clone() - nalgebra::DVector::from_vec(r.params)).amax();
+    assert!(d0 < 1e-10 * (1.0 + d0), "state0 {d0:e}");
+    assert!(dp < 1e-10 * params.amax().max(1.0), "params {dp:e}");
+}
+
+#[test]
+fn flat_step_vjp_matches_finite_differences_in_raw_coordinates() {
+    use ukemi_engine::gradients::flat;
+    // floating base + ball joint: quaternions in the flat state
+    let m = floating_with(JointKind::Spherical);
+    let mut qpos = m.qpos0.clone();
+    ukemi_engine::gradients::tangent::integrate_qpos(
+        &m,
+        &mut qpos,
+        &[0.1, 0.2, -0.1, 0.3, -0.2, 0.4, 0.5, -0.3, 0.2],
+    );
+    let qvel: Vec<f64> = (0..m.nv).map(|i| 0.5 - 0.13 * i as f64).collect();
+    let x: Vec<f64> = qpos.iter().chain(&qvel).copied().collect();
+    let n = x.len();
+    let adj: Vec<f64> = (0..n).map(|i| ((i * 3 + 1) % 5) as f64 - 2.0).collect();
+    let (gx, _, _) = flat::step_vjp(&m, &x, &[], &adj, None, false).unwrap();
+    let loss = |x: &[f64]| -> f64 {
+        let y = flat::step(&m, x, &[]).unwrap();
+        y.iter().zip(&adj).map(|(a, b)| a * b).sum()
+    };
+    for i in 0..n {
+        let (mut xp, mut xm) = (x.clone(), x.clone());
+        xp[i] += 1e-6;
+        xm[i] -= 1e-6;
+        let fd = (loss(&xp) - loss(&xm)) / 2e-6;
+        assert!(
+            (fd - gx[i]).abs() < 1e-6 * fd.abs().max(1.0),
+            "x[{i}]: fd {fd} vs {}",
+            gx[i]
+        );
+    }
+}

@@ -1,0 +1,205 @@
+"""Implicit gradients from Python: finite differences, MuJoCo's transition derivatives, the
+box-push experiment of the Dojo paper (Fig. 4), and the error contract."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import ukemi
+
+
+def pendulum(h=0.01, damping=0.0, length=1.0):
+    b = ukemi.ModelBuilder(timestep=h)
+    b.add_body("bob", mass=1.0, inertia=(1e-3, 1e-3, 1e-3), pos=(0, 0, -length))
+    b.add_joint("hinge", kind="revolute", parent="world", child="bob", axis=(0, 1, 0),
+                parent_anchor=(0, 0, 0), child_anchor=(0, 0, length), damping=damping)
+    b.add_actuator("motor", joint="hinge", gear=1.0)
+    return b.compile()
+
+
+def tight(model):
+    return model.with_options(rtol=1e-14, max_iter=100)
+
+
+def box_on_floor(mu=0.5, h=0.01):
+    b = ukemi.ModelBuilder(timestep=h)
+    b.add_geom("floor", body="world", shape="plane", friction=mu)
+    b.add_body("box", mass=1.0, inertia=(1 / 600, 1 / 600, 1 / 600), pos=(0, 0, 0.05))
+    b.add_joint("free", kind="floating", parent="world", child="box")
+    b.add_geom("box", body="box", shape="box", size=(0.05, 0.05, 0.05), friction=mu)
+    b.add_actuator("push", joint="free", gear=1.0)
+    return b.compile()
+
+
+def settle(model, steps=30):
+    s = model.make_state()
+    for _ in range(steps):
+        s, _ = ukemi.step(model, s, np.zeros(model.nu))
+    return s
+
+
+def fd_A_B(model, state, ctrl, eps=1e-6):
+    """Central differences of the minimal step map (qpos, qvel) -> (qpos, qvel) (hinge only)."""
+    q0, v0 = state.qpos, state.qvel
+    nv = model.nv
+
+    def f(q, v, u):
+        s = model.make_state(qpos=q, qvel=v)
+        n, _ = ukemi.step(model, s, u)
+        return np.concatenate([n.qpos, n.qvel])
+
+    A = np.zeros((2 * nv, 2 * nv))
+    for i in range(2 * nv):
+        d = np.zeros(2 * nv)
+        d[i] = eps
+        A[:, i] = (f(q0 + d[:nv], v0 + d[nv:], ctrl) - f(q0 - d[:nv], v0 - d[nv:], ctrl)) / (2 * eps)
+    B = np.zeros((2 * nv, model.nu))
+    for i in range(model.nu):
+        du = np.zeros(model.nu)
+        du[i] = eps
+        B[:, i] = (f(q0, v0, ctrl + du) - f(q0, v0, ctrl - du)) / (2 * eps)
+    return A, B
+
+
+def test_step_jacobians_match_finite_differences_of_step():
+    m = tight(pendulum(damping=0.2))
+    s = m.make_state(qpos=[0.7], qvel=[-1.1])
+    jac = ukemi.step_jacobians(m, s, [0.4])
+    A, B = fd_A_B(m, s, np.array([0.4]))
+    assert jac.A.shape == (2, 2) and jac.B.shape == (2, 1) and jac.C.shape == (2, len(m.params))
+    np.testing.assert_allclose(jac.A, A, rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(jac.B, B, rtol=1e-6, atol=1e-10)
+    # the gravity column: d(next)/d(g_z) by rebuilding the model with other params
+    names = list(m.param_names)
+    k = names.index("gravity[z]")
+    p = m.params
+    dp = np.zeros_like(p)
+    dp[k] = 1e-5
+    nxt = lambda mm: (lambda n: np.concatenate([n.qpos, n.qvel]))(ukemi.step(mm, s, [0.4])[0])
+    fd = (nxt(m.with_params(p + dp)) - nxt(m.with_params(p - dp))) / 2e-5
+    np.testing.assert_allclose(jac.C[:, k], fd, rtol=1e-6, atol=1e-10)
+
+
+def test_products_equal_jacobian_products():
+    m = tight(pendulum(damping=0.1))
+    s = m.make_state(qpos=[0.2], qvel=[0.5])
+    jac = ukemi.step_jacobians(m, s, [0.1])
+    a = np.array([0.3, -1.2])
+    gx, gu, gp = ukemi.step_vjp(m, s, [0.1], a)
+    np.testing.assert_allclose(gx, jac.A.T @ a, rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(gu, jac.B.T @ a, rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(gp, jac.C.T @ a, rtol=1e-10, atol=1e-14)
+    t = np.array([0.7, -0.1])
+    np.testing.assert_allclose(ukemi.step_jvp(m, s, [0.1], t, [0.5]), jac.A @ t + jac.B @ [0.5],
+                               rtol=1e-10, atol=1e-14)
+    # rollout VJP = chained transposes. The reverse sweep re-solves each step from its stored
+    # state, so linearisation points agree to the solver tolerance, not bit for bit: the
+    # finite-difference partials then agree to ~1e-10 relative (1e-8 asserted; the engine test
+    # `rollout_vjp_equals_chained_jacobian_transposes` checks identical points to 1e-10).
+    T = 5
+    ctrls = np.linspace(-1, 1, T)[:, None]
+    adj = np.random.default_rng(0).normal(size=(T + 1, 2))
+    g0, gus, gps = ukemi.rollout_vjp(m, s, ctrls, adj)
+    states = [s]
+    jacs = []
+    for k in range(T):
+        j = ukemi.step_jacobians(m, states[-1], ctrls[k])
+        jacs.append(j)
+        states.append(j.next_state)
+    lam = adj[T]
+    gp_ref = np.zeros(len(m.params))
+    for k in reversed(range(T)):
+        np.testing.assert_allclose(gus[k], jacs[k].B.T @ lam, rtol=1e-8, atol=1e-12)
+        gp_ref += jacs[k].C.T @ lam
+        lam = jacs[k].A.T @ lam + adj[k]
+    np.testing.assert_allclose(g0, lam, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(gps, gp_ref, rtol=1e-8, atol=1e-12)
+
+
+def test_pendulum_jacobians_agree_with_mujoco_transition_fd():
+    mujoco = pytest.importorskip("mujoco")
+    xml = """<mujoco><option timestep="{h}" integrator="Euler"/>
+      <worldbody><body name="bob" pos="0 0 -1">
+        <joint name="hinge" type="hinge" axis="0 1 0" pos="0 0 1"/>
+        <inertial pos="0 0 0" mass="1" diaginertia="1e-3 1e-3 1e-3"/>
+      </body></worldbody>
+      <actuator><motor joint="hinge" gear="1"/></actuator></mujoco>"""
+    errs = []
+    for h in (4e-3, 2e-3, 1e-3):
+        mj = mujoco.MjModel.from_xml_string(xml.format(h=h))
+        d = mujoco.MjData(mj)
+        d.qpos[:] = [0.6]
+        d.qvel[:] = [0.8]
+        d.ctrl[:] = [0.3]
+        A = np.zeros((2, 2))
+        B = np.zeros((2, 1))
+        mujoco.mjd_transitionFD(mj, d, 1e-7, 1, A, B, None, None)
+        m = tight(pendulum(h=h))
+        jac = ukemi.step_jacobians(m, m.make_state(qpos=[0.6], qvel=[0.8]), [0.3])
+        # both are I + h (...) + O(h²): compare the O(h) parts
+        errs.append(np.abs(jac.A - A).max() / np.abs(A - np.eye(2)).max())
+        np.testing.assert_allclose(jac.B, B, rtol=0.05, atol=1e-9)
+    print("relative A difference ukemi vs MuJoCo per dt (4e-3, 2e-3, 1e-3):", errs)
+    assert errs[-1] < 0.02
+    assert errs[0] / errs[-1] > 3.0  # the integrators' difference shrinks with the step
+
+
+def test_box_push_gradient_is_smoothed_by_kappa():
+    """Dojo Fig. 4: displacement of a resting 1 kg box vs push force; the kink at the
+    friction threshold μ m g is smoothed for large κ and sharp for small κ."""
+    mu, h = 0.5, 0.01
+    m = tight(box_on_floor(mu, h))
+    s = settle(m)
+    threshold = mu * 9.81
+
+    def grad(force, kappa):
+        jac = ukemi.step_jacobians(m, s, [force], kappa_grad=kappa, wrt=("ctrl",))
+        return jac.B[0, 0]  # d(Δx tangent)/dF
+
+    hard = h * h / 1.0  # d(x⁺)/dF when sliding: h² / m
+    # far from the kink, the small-κ gradient is the hard subgradient
+    assert abs(grad(2.0, 1e-8)) < 1e-3 * hard
+    assert grad(9.0, 1e-8) == pytest.approx(hard, rel=1e-3)
+    # at the kink the large-κ gradient is in between (smooth), the small-κ one is not
+    # (κ is in impulse × distance units: the resting corners carry γ ≈ 0.025 N·s each, so
+    # κ = 1e-4 lets contact act across ~4 mm: strongly smoothed)
+    mid_smooth = grad(threshold, 1e-4)
+    assert 0.05 * hard < mid_smooth < 0.95 * hard
+    sharp = [grad(threshold - 2.9, k) for k in (1e-4, 1e-6, 1e-8)]
+    assert sharp[0] > sharp[1] > sharp[2] >= -1e-9  # sharpens as κ shrinks
+
+
+def test_gradient_at_failed_step_raises_convergence_error():
+    m = box_on_floor()
+    s = settle(m)
+    bad = m.with_options(max_iter=1)
+    with pytest.raises(ukemi.ConvergenceError, match="did not converge"):
+        ukemi.step_jacobians(bad, s, [30.0], kappa_grad=1e-4)
+
+
+def test_bad_gradient_arguments_name_the_field():
+    m = pendulum()
+    s = m.make_state()
+    with pytest.raises(ukemi.ShapeError, match="adjoint_next"):
+        ukemi.step_vjp(m, s, [0.0], [1.0, 2.0, 3.0])
+    with pytest.raises(ukemi.InputError, match="kappa_grad"):
+        ukemi.step_jacobians(m, s, [0.0], kappa_grad=-1.0)
+    with pytest.raises(ValueError, match="coordinates"):
+        ukemi.step_jacobians(m, s, [0.0], coordinates="polar")
+    with pytest.raises(ukemi.ShapeError, match="params"):
+        m.with_params([1.0])
+    p = m.params
+    p[0] = -2.0
+    with pytest.raises(ukemi.InputError, match=r"body_mass\[bob\]"):
+        m.with_params(p)
+
+
+def test_params_round_trip_and_model_default_kappa():
+    m = pendulum()
+    assert len(m.params) == len(m.param_names)
+    m2 = m.with_params(m.params * 1.0)
+    np.testing.assert_array_equal(m2.params, m.params)
+    assert m.kappa_grad is None
+    assert m.with_options(kappa_grad=1e-3).kappa_grad == 1e-3
+    assert m.with_options(kappa_grad=1e-3).with_options(kappa_grad=0).kappa_grad is None
