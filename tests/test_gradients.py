@@ -203,3 +203,79 @@ def test_params_round_trip_and_model_default_kappa():
     assert m.kappa_grad is None
     assert m.with_options(kappa_grad=1e-3).kappa_grad == 1e-3
     assert m.with_options(kappa_grad=1e-3).with_options(kappa_grad=0).kappa_grad is None
+
+
+def test_floating_humanoid_in_the_air_jacobians_match_finite_differences():
+    """gymnasium's humanoid (3-hinge composite hips/abdomen, 2-hinge shoulders) lifted 1 m into
+    the air: A and B equal central differences of the engine's own step to 1e-6."""
+    path = ukemi.gymnasium_asset_path("humanoid")
+    with pytest.warns(UserWarning):
+        m = ukemi.Model.from_xml_path(path)
+    m = tight(m)
+    rng = np.random.default_rng(3)
+    s0 = m.make_state()
+    q = np.array(s0.qpos)
+    q[2] += 1.0  # free root lifted: no contact is near
+    q[7:] += 0.1 * rng.normal(size=m.nq - 7)
+    v = 0.3 * rng.normal(size=m.nv)
+    s = m.make_state(qpos=q, qvel=v)
+    u = 0.2 * rng.normal(size=m.nu)
+    jac = ukemi.step_jacobians(m, s, u, wrt=("state", "ctrl"))
+    nv = m.nv
+
+    # directional finite differences along random tangents (all 2nv columns would be slow in CI)
+    base = ukemi.step(m, s, u)[0]
+    for trial in range(3):
+        dx = rng.normal(size=2 * nv)
+        du = rng.normal(size=m.nu)
+        eps = 1e-6
+        outs = []
+        for sign in (1.0, -1.0):
+            sp = _perturbed_state(m, s, sign * eps * dx)
+            n = ukemi.step(m, sp, u + sign * eps * du)[0]
+            outs.append(_tangent_difference(m, base, n))
+        fd = (outs[0] - outs[1]) / (2 * eps)
+        pred = jac.A @ dx + jac.B @ du
+        np.testing.assert_allclose(pred, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+
+
+def _quat_mul(a, b):
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _free_root(model):
+    """The humanoid's only quaternion is its free root: qpos[3:7], tangent dq[3:6]."""
+    return 3
+
+
+def _perturbed_state(model, state, d):
+    nv = model.nv
+    q = np.array(state.qpos)
+    dq, dv = d[:nv], d[nv:]
+    a = _free_root(model)
+    q[:a] += dq[:a]
+    phi = dq[a:a + 3]
+    ang = np.linalg.norm(phi)
+    e = np.array([1.0, 0, 0, 0]) if ang == 0 else np.concatenate([[np.cos(ang / 2)], np.sin(ang / 2) * phi / ang])
+    q[a:a + 4] = _quat_mul(q[a:a + 4], e)
+    q[a + 4:] += dq[a + 3:]
+    return model.make_state(qpos=q, qvel=np.array(state.qvel) + dv)
+
+
+def _tangent_difference(model, base, other):
+    nv = model.nv
+    q0, q1 = np.array(base.qpos), np.array(other.qpos)
+    a = _free_root(model)
+    out = np.zeros(2 * nv)
+    out[:a] = q1[:a] - q0[:a]
+    c = _quat_mul(q0[a:a + 4] * np.array([1, -1, -1, -1]), q1[a:a + 4])
+    if c[0] < 0:
+        c = -c
+    s = np.linalg.norm(c[1:])
+    out[a:a + 3] = 2 * np.arctan2(s, c[0]) * c[1:] / s if s > 0 else 2 * c[1:]
+    out[a + 3:nv] = q1[a + 4:] - q0[a + 4:]
+    out[nv:] = np.array(other.qvel) - np.array(base.qvel)
+    return out

@@ -22,8 +22,14 @@ def _lead(name, a, n):
     return a.shape[:-1]
 
 
+def _count(lead) -> int:
+    return int(np.prod(lead, dtype=np.int64))
+
+
 def _flatten(a, lead, n):
-    return np.ascontiguousarray(np.broadcast_to(a, lead + (n,)).reshape(-1, n), dtype=np.float64)
+    # explicit batch size: reshape(-1, 0) is ambiguous when n == 0 (no controls)
+    return np.ascontiguousarray(np.broadcast_to(a, lead + (n,)).reshape(_count(lead), n),
+                                dtype=np.float64)
 
 
 def unbroadcast(g, shape):
@@ -78,7 +84,7 @@ def rollout(model, x0, us, p):
         p = np.asarray(p, np.float64)
         shapes.append(_lead("params", p, np_))
     lead = np.broadcast_shapes(*shapes)
-    U = np.ascontiguousarray(np.broadcast_to(us, lead + (t, nu)).reshape(-1, t, nu))
+    U = np.ascontiguousarray(np.broadcast_to(us, lead + (t, nu)).reshape(_count(lead), t, nu))
     P = None if p is None else _flatten(p, lead, np_)
     out = _ukemi._flat_rollout(model, _flatten(x0, lead, nx), U, P)
     return out.reshape(lead + (t + 1, nx))
@@ -93,8 +99,8 @@ def rollout_vjp(model, x0, us, p, g, kappa_grad):
         p = np.asarray(p, np.float64)
         shapes.append(_lead("params", p, np_))
     lead = np.broadcast_shapes(*shapes)
-    U = np.ascontiguousarray(np.broadcast_to(us, lead + (t, nu)).reshape(-1, t, nu))
-    G = np.ascontiguousarray(np.broadcast_to(g, lead + (t + 1, nx)).reshape(-1, t + 1, nx))
+    U = np.ascontiguousarray(np.broadcast_to(us, lead + (t, nu)).reshape(_count(lead), t, nu))
+    G = np.ascontiguousarray(np.broadcast_to(g, lead + (t + 1, nx)).reshape(_count(lead), t + 1, nx))
     P = None if p is None else _flatten(p, lead, np_)
     gx, gu, gp = _ukemi._flat_rollout_vjp(model, _flatten(x0, lead, nx), U, G, kappa_grad, P,
                                           p is not None)

@@ -1,0 +1,119 @@
+"""Dojo paper Table V workload: forward step + full minimal-coordinate Jacobians A and B every
+step, for 1000 steps at dt = 0.01 with random controls in the control range, against MuJoCo
+(mj_step + mjd_transitionFD) on the same MJCF file, in the same run. Also forward only and the
+rollout VJP. Numbers are printed, not asserted.
+
+    .venv/bin/python examples/benchmarks/table5.py            # reduced: 100 steps
+    .venv/bin/python examples/benchmarks/table5.py --steps 1000
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import ukemi
+
+SHARED = Path(__file__).resolve().parents[3] / "shared" / "models"
+
+
+def models():
+    out = [(f"gymnasium/{n}", Path(ukemi.gymnasium_asset_path(n)))
+           for n in ("inverted_double_pendulum", "reacher", "hopper", "humanoid")]
+    out += [(f"shared/{n}", SHARED / f"{n}.xml") for n in ("humanoid", "a1", "panda", "x2")]
+    return out
+
+
+def random_ctrls(lo, hi, steps, rng):
+    return lo + (hi - lo) * rng.random((steps, len(lo)))
+
+
+def bench_ukemi(model, ctrls, with_jac):
+    s = model.make_state(key=model.keyframe_names[0]) if model.keyframe_names else model.make_state()
+    t0 = time.perf_counter()
+    fails = 0
+    for u in ctrls:
+        if with_jac:
+            try:
+                s = ukemi.step_jacobians(model, s, u, wrt=("state", "ctrl")).next_state
+            except ukemi.ConvergenceError:
+                fails += 1
+                s, _ = ukemi.step(model, s, u, on_failure="return")
+        else:
+            s, info = ukemi.step(model, s, u, on_failure="return")
+            fails += info.status != "converged"
+    return time.perf_counter() - t0, fails
+
+
+def bench_rollout_vjp(model, ctrls):
+    s = model.make_state(key=model.keyframe_names[0]) if model.keyframe_names else model.make_state()
+    adj = np.ones((len(ctrls) + 1, 2 * model.nv))
+    t0 = time.perf_counter()
+    try:
+        ukemi.rollout_vjp(model, s, ctrls, adj, params=False)
+        ok = True
+    except ukemi.ConvergenceError:
+        ok = False
+    return time.perf_counter() - t0, ok
+
+
+def bench_mujoco(path, ctrls, with_jac):
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(path))
+    m.opt.timestep = 0.01
+    if m.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4:
+        m.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER  # mjd_transitionFD has no RK4
+    d = mujoco.MjData(m)
+    if m.nkey:
+        mujoco.mj_resetDataKeyframe(m, d, 0)
+    n = 2 * m.nv + m.na
+    A, B = np.zeros((n, n)), np.zeros((n, m.nu))
+    t0 = time.perf_counter()
+    for u in ctrls:
+        d.ctrl[:] = u
+        if with_jac:
+            mujoco.mjd_transitionFD(m, d, 1e-6, 1, A, B, None, None)
+        mujoco.mj_step(m, d)
+    return time.perf_counter() - t0
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--steps", type=int, default=100)
+    args = ap.parse_args()
+    rng = np.random.default_rng(0)
+    print(f"{'model':24s} {'nv':>4s} {'nu':>3s} | {'ukemi fwd':>10s} {'mj fwd':>9s} | "
+          f"{'ukemi A,B':>10s} {'mj FD':>9s} {'ratio':>6s} | {'rollout VJP':>11s} {'/mj FD':>7s}")
+    for name, path in models():
+        if not path.exists():
+            print(f"{name:24s} skipped: {path} not found")
+            continue
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = ukemi.Model.from_xml_path(str(path)).with_options(timestep=0.01)
+        except ukemi.UkemiError as e:
+            print(f"{name:24s} skipped: {type(e).__name__}: {str(e)[:90]}")
+            continue
+        r = np.array(model.actuator_ctrlrange) if model.nu else np.zeros((0, 2))
+        lo = np.where(np.isfinite(r[:, 0]), r[:, 0], -1.0) if model.nu else np.zeros(0)
+        hi = np.where(np.isfinite(r[:, 1]), r[:, 1], 1.0) if model.nu else np.zeros(0)
+        ctrls = random_ctrls(lo, hi, args.steps, rng)
+        tf, ff = bench_ukemi(model, ctrls, False)
+        tj, fj = bench_ukemi(model, ctrls, True)
+        tv, okv = bench_rollout_vjp(model, ctrls)
+        mf, mj = bench_mujoco(path, ctrls, False), bench_mujoco(path, ctrls, True)
+        print(f"{name:24s} {model.nv:4d} {model.nu:3d} | {tf:9.3f}s {mf:8.3f}s | {tj:9.3f}s {mj:8.3f}s "
+              f"{tj / mj:6.2f} | {tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f}"
+              + (f"   ({ff} fwd / {fj} jac steps unconverged)" if ff or fj else ""))
+    print("ratio = ukemi/MuJoCo (target: A,B ≤ 0.5; rollout VJP ≤ 0.1 of MuJoCo's FD); "
+          "* = rollout VJP stopped at an unconverged step")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,47 @@
+"""The examples run in reduced form (the full runs are command-line options)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def run(name, *argv, tmp_path=None):
+    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    old = sys.argv
+    sys.argv = [name, *argv]
+    try:
+        return mod.main()
+    finally:
+        sys.argv = old
+
+
+def test_box_push_example_reproduces_the_friction_kink(tmp_path):
+    forces, disp, grads = run("box_push_gradients", "--points", "6", "--out", str(tmp_path / "b.png"))
+    h, mu, g = 0.01, 0.5, 9.81
+    sliding = forces > mu * g + 0.5
+    # above the threshold one step moves the box by h² (F - μ m g) / m
+    np.testing.assert_allclose(disp[sliding], h * h * (forces[sliding] - mu * g), rtol=1e-6)
+    assert np.all(np.abs(disp[forces < mu * g - 0.5]) < 1e-9)
+    assert (tmp_path / "b.png").exists()
+
+
+def test_jax_throw_example_reduces_the_distance():
+    pytest.importorskip("jax")
+    err = run("jax_throw", "--iters", "4", "--steps", "60")
+    assert err < 0.6  # from ~0.7 m at the initial guess
+
+
+def test_torch_policy_example_lowers_the_cost(tmp_path):
+    pytest.importorskip("torch")
+    _, curve = run("torch_policy", "--iters", "4", "--steps", "20", "--batch", "2",
+                   "--out", str(tmp_path / "p.png"))
+    assert curve[-1] < curve[0]
