@@ -167,7 +167,7 @@ def test_torch_rollout_backward_matches_jax():
 def test_torch_func_grad_vmap_and_compile():
     m = arm()
     x = torch.tensor(x0_of(m))
-    u = torch.tensor([0.2, 0.1])
+    u = torch.tensor([0.2, 0.1], dtype=torch.float64)
     f = lambda x: (utorch.step(m, x, u) ** 2).sum()
     g = torch.func.grad(f)(x)
     xt = x.clone().requires_grad_(True)

@@ -413,3 +413,15 @@ pub fn flat_rollout_vjp<'py>(
         ))
     })
 }
+
+/// Threads used by batched calls (0 restores one per core).
+#[pyfunction]
+pub fn set_num_threads(n: usize) -> PyResult<()> {
+    guard(|| flat::set_num_threads(n).py())
+}
+
+/// Threads used by batched calls.
+#[pyfunction]
+pub fn get_num_threads() -> usize {
+    flat::num_threads()
+}

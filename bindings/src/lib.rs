@@ -26,6 +26,8 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gradients::flat_step_vjp, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_rollout, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_rollout_vjp, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::set_num_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::get_num_threads, m)?)?;
     let kinds: Vec<&str> = ukemi_engine::JointKind::ALL
         .iter()
         .map(|k| k.name())

@@ -175,8 +175,19 @@ class _Rollout(torch.autograd.Function):
         return gx, gu, gp, None, None, None
 
 
+def _check_dtype(name, t):
+    if not isinstance(t, torch.Tensor):
+        raise TypeError(f"`{name}` must be a torch.Tensor, got {type(t).__name__}")
+    if t.dtype != torch.float64:
+        raise TypeError(f"`{name}` must be float64 (got {t.dtype}): the engine works in float64; "
+                        f"convert explicitly with `{name}.double()`")
+
+
 def _args(model, x, u, params, kappa_grad, nu_shape):
     k = resolve_kappa(model, kappa_grad)
+    for name, t in (("x", x), ("u", u), ("params", params)):
+        if t is not None:
+            _check_dtype(name, t)
     u = u if u is not None else x.new_zeros(nu_shape)
     p = params if params is not None else x.new_zeros((0,))
     return u, p, _key(model), (-1.0 if k is None else float(k)), params is not None

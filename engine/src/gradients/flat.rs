@@ -160,6 +160,35 @@ pub fn rollout_vjp(
     Ok((adj_x, adj.ctrls, adj.params))
 }
 
+static POOL: std::sync::RwLock<Option<std::sync::Arc<rayon::ThreadPool>>> =
+    std::sync::RwLock::new(None);
+
+/// Use `n` threads for batched calls (0: rayon's default, one per core).
+pub fn set_num_threads(n: usize) -> Result<()> {
+    let pool = if n == 0 {
+        None
+    } else {
+        let p = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .map_err(|e| Error::input("num_threads", n, e.to_string()))?;
+        Some(std::sync::Arc::new(p))
+    };
+    match POOL.write() {
+        Ok(mut g) => *g = pool,
+        Err(poisoned) => *poisoned.into_inner() = pool,
+    }
+    Ok(())
+}
+
+/// Threads used by batched calls.
+pub fn num_threads() -> usize {
+    match POOL.read().ok().and_then(|g| g.clone()) {
+        Some(p) => p.current_num_threads(),
+        None => rayon::current_num_threads(),
+    }
+}
+
 /// Apply `f` to each batch element in parallel; `models` has one model or one per element.
 /// The first error wins (with its batch index).
 pub fn batched<T: Send>(
@@ -171,30 +200,37 @@ pub fn batched<T: Send>(
         models.len() == 1 || models.len() == batch,
         Error::shape("params", &[batch], &[models.len()])
     );
-    (0..batch)
-        .into_par_iter()
-        .map(|i| {
-            let m = if models.len() == 1 {
-                &models[0]
-            } else {
-                &models[i]
-            };
-            f(m, i).map_err(|e| match e {
-                Error::NotConverged {
-                    context,
-                    status,
-                    iterations,
-                    residual,
-                    complementarity,
-                } => Error::NotConverged {
-                    context: format!("{context} (batch element {i})"),
-                    status,
-                    iterations,
-                    residual,
-                    complementarity,
-                },
-                other => other,
+    let pool = POOL.read().ok().and_then(|g| g.clone());
+    let run = || {
+        (0..batch)
+            .into_par_iter()
+            .map(|i| {
+                let m = if models.len() == 1 {
+                    &models[0]
+                } else {
+                    &models[i]
+                };
+                f(m, i).map_err(|e| match e {
+                    Error::NotConverged {
+                        context,
+                        status,
+                        iterations,
+                        residual,
+                        complementarity,
+                    } => Error::NotConverged {
+                        context: format!("{context} (batch element {i})"),
+                        status,
+                        iterations,
+                        residual,
+                        complementarity,
+                    },
+                    other => other,
+                })
             })
-        })
-        .collect()
+            .collect()
+    };
+    match pool {
+        Some(p) => p.install(run),
+        None => run(),
+    }
 }

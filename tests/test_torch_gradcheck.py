@@ -1,0 +1,120 @@
+"""torch.autograd.gradcheck on ukemi.torch.step and rollout for a pendulum, a cartpole, a box
+sliding on the floor and gymnasium's hopper standing on the floor, with respect to state,
+controls and parameters (the contact scenes in a fixed active set, where the hard step is
+smooth, so the exact gradient, kappa_grad=None, must match finite differences)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import ukemi
+
+torch = pytest.importorskip("torch")
+import ukemi.torch as ut  # noqa: E402
+
+
+def tight(m):
+    return m.with_options(rtol=1e-14, max_iter=100)
+
+
+def pendulum():
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_body("bob", mass=1.0, inertia=(1e-3, 1e-3, 1e-3), pos=(0, 0, -0.5))
+    b.add_joint("hinge", kind="revolute", parent="world", child="bob", axis=(0, 1, 0),
+                parent_anchor=(0, 0, 0), child_anchor=(0, 0, 0.5), damping=0.1)
+    b.add_actuator("motor", joint="hinge", gear=2.0)
+    return tight(b.compile()), np.array([0.4, -0.8])
+
+
+def cartpole():
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_body("cart", mass=1.0, inertia=(0.01, 0.01, 0.01), pos=(0, 0, 0))
+    b.add_body("pole", mass=0.2, inertia=(0.004, 0.004, 1e-4), pos=(0, 0, 0.3))
+    b.add_joint("slider", kind="prismatic", parent="world", child="cart", axis=(1, 0, 0))
+    b.add_joint("hinge", kind="revolute", parent="cart", child="pole", axis=(0, 1, 0),
+                parent_anchor=(0, 0, 0), child_anchor=(0, 0, -0.3))
+    b.add_actuator("push", joint="slider", gear=5.0)
+    return tight(b.compile()), np.array([0.1, 0.2, 0.3, -0.5])
+
+
+def sliding_box():
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("floor", body="world", shape="plane", friction=0.3)
+    b.add_body("box", mass=1.0, inertia=(1 / 600, 1 / 600, 1 / 600), pos=(0, 0, 0.05))
+    b.add_joint("free", kind="floating", parent="world", child="box")
+    b.add_geom("box", body="box", shape="box", size=(0.05, 0.05, 0.05), friction=0.3)
+    b.add_actuator("push", joint="free", gear=1.0)
+    m = tight(b.compile())
+    s = m.make_state()
+    for _ in range(20):
+        s, _ = ukemi.step(m, s, [0.0])
+    x = np.concatenate([s.qpos, [1.0, 0.2, 0.0, 0.0, 0.0, 0.0]])  # sliding at ~1 m/s
+    return m, x
+
+
+def hopper():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = tight(ukemi.Model.from_xml_path(ukemi.gymnasium_asset_path("hopper")))
+    s = m.make_state()
+    for _ in range(30):  # stand on the floor
+        s, _ = ukemi.step(m, s, np.zeros(m.nu))
+    return m, np.concatenate([s.qpos, s.qvel])
+
+
+SCENES = {"pendulum": pendulum, "cartpole": cartpole, "sliding_box": sliding_box, "hopper": hopper}
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_gradcheck_step_state_ctrl_params(name):
+    m, x0 = SCENES[name]()
+    names = list(m.param_names)
+    pick = [i for i, n in enumerate(names) if n.startswith(("body_mass", "gravity[z]", "geom_friction"))]
+    base = torch.tensor(m.params)
+    sel = torch.tensor(pick)
+
+    def f(x, u, psub):
+        p = base.index_put((sel,), psub)
+        return ut.step(m, x, u, params=p, kappa_grad=None)
+
+    x = torch.tensor(x0, requires_grad=True)
+    u = torch.full((m.nu,), 0.1, dtype=torch.float64, requires_grad=True)
+    psub = base[sel].clone().requires_grad_(True)
+    assert torch.autograd.gradcheck(f, (x, u, psub), eps=1e-6, atol=1e-5, rtol=1e-4)
+
+
+@pytest.mark.parametrize("name", ["pendulum", "sliding_box"])
+def test_gradcheck_rollout(name):
+    m, x0 = SCENES[name]()
+    x = torch.tensor(x0, requires_grad=True)
+    us = torch.full((5, m.nu), 0.1, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda x, us: ut.rollout(m, x, us, kappa_grad=None), (x, us),
+                                    eps=1e-6, atol=1e-5, rtol=1e-4)
+
+
+def test_float32_is_a_clear_error():
+    m, x0 = pendulum()
+    with pytest.raises(TypeError, match="float64"):
+        ut.step(m, torch.tensor(x0, dtype=torch.float32), torch.zeros(1, dtype=torch.float32))
+
+
+def test_batch_of_64_equals_single_calls_and_threads_are_settable():
+    m, x0 = cartpole()
+    rng = np.random.default_rng(0)
+    xs = torch.tensor(x0 + 0.1 * rng.normal(size=(64, x0.size)))
+    u = torch.tensor([0.3], dtype=torch.float64)
+    f = lambda x: (ut.step(m, x, u) ** 2).sum()
+    g = torch.func.vmap(torch.func.grad(f))(xs)
+    for i in range(0, 64, 9):
+        torch.testing.assert_close(g[i], torch.func.grad(f)(xs[i]))
+    n = ukemi.get_num_threads()
+    ukemi.set_num_threads(1)
+    try:
+        assert ukemi.get_num_threads() == 1
+        torch.testing.assert_close(torch.func.vmap(torch.func.grad(f))(xs), g)
+    finally:
+        ukemi.set_num_threads(0)
+    assert ukemi.get_num_threads() == n
