@@ -21,7 +21,7 @@ from ._builder import JOINT_KINDS, ModelBuilder
 from ._loaders import gymnasium_asset_path, load
 from ._gradients import StepJacobians, rollout_vjp, step_jacobians, step_jvp, step_vjp
 from ._simulate import STATUS_NAMES, Trajectory, rollout, signed_distances, step
-from ._ukemi import Model, State, StepInfo
+from ._ukemi import Model, State, StepInfo, get_num_threads, set_num_threads
 from .errors import (
     ConvergenceError,
     InputError,
@@ -54,10 +54,12 @@ __all__ = [
     "Trajectory",
     "UkemiError",
     "UnsupportedError",
+    "get_num_threads",
     "gymnasium_asset_path",
     "load",
     "rollout",
     "rollout_vjp",
+    "set_num_threads",
     "signed_distances",
     "step",
     "step_jacobians",
@@ -66,7 +68,16 @@ __all__ = [
 ]
 
 # Framework layers import their framework: load them on first access (`ukemi.jax.step`).
-_LAZY = ("jax", "torch")
+_LAZY = ("jax", "torch", "envs")
+
+# gymnasium environments ("ukemi/Hopper-v0", ...): registration imports gymnasium only; the env
+# modules load on gymnasium.make. Skipped silently without gymnasium.
+try:
+    from .envs._registration import register_envs as _register_envs
+
+    _register_envs()
+except ImportError:  # pragma: no cover - gymnasium not installed
+    pass
 
 
 def __getattr__(name: str):

@@ -1,0 +1,224 @@
+"""Base class of ukemi's gymnasium environments: MuJoCo's ``MujocoEnv`` contract on ukemi physics.
+
+The env state is the flat ``x = [qpos, qvel]`` in MuJoCo's layout (``set_state(qpos, qvel)`` and
+``state_vector()`` behave as in gymnasium's ``MujocoEnv``). One env step holds the action as the
+control for ``frame_skip`` engine steps, so ``dt = timestep * frame_skip``.
+
+Solver failures: an env step whose solve fails at any substep (status ``max_iterations``,
+``line_search_failed`` or ``non_finite``) **truncates** the episode. The state stays at the last
+converged state, the observation is that state's, the reward is 0.0, ``truncated=True``,
+``terminated=False``, ``info["solver_status"]`` names the failure and a
+:class:`SolverFailureWarning` is issued (``warn_on_solver_failure=False`` silences it).
+Truncation, not termination, because the failure is the simulator's, not the task's: value
+bootstrapping from the last valid observation stays correct. Every step's ``info`` carries
+``"solver_status"`` (``"converged"`` normally).
+
+Joint limits: ukemi's joint limits are hard (an inequality in the solve), MuJoCo's are soft
+(a spring-damper that lets a joint sit beyond its range and pushes it back over several
+steps). gymnasium's reset noise puts joints beyond their ranges (Hopper's and Walker2d's knees
+start at their upper limit 0 ± 0.005 rad; Ant's ankles start at 0, outside [30°, 70°]), which
+ukemi would correct within one step at a large velocity (0.005 rad / 0.002 s = 2.5 rad/s on
+Hopper). So ``reset`` clips the noisy ``qpos`` into the joint ranges
+(``clip_reset_to_joint_limits=False`` keeps gymnasium's exact reset distribution).
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from . import _render
+from ._assets import asset_path, load_model, mjcf_info, rotate
+from ._physics import simulate
+
+
+class SolverFailureWarning(RuntimeWarning):
+    """An env step's solve did not converge; the episode was truncated."""
+
+
+class UkemiMujocoEnv(gymnasium.Env):
+    """Common machinery: model loading, stepping, reset, rendering. Subclasses define the task.
+
+    Args:
+        xml_file: A gymnasium asset name (``"hopper.xml"``) or a path to an MJCF file.
+        frame_skip: Engine steps per env step.
+        timestep: Engine time step (s); None keeps the MJCF's. ``dt = timestep * frame_skip``.
+        solver_options: Keyword arguments of ``ukemi.Model.with_options`` (``rtol``,
+            ``kappa_tol``, ``max_iter``, ``max_ls``, ``undercut``, ``warm_start``,
+            ``regularization``).
+        render_mode: None or ``"rgb_array"`` (a simple software renderer, no OpenGL).
+        width, height: Image size of ``render()`` in pixels.
+        warn_on_solver_failure: Issue a :class:`SolverFailureWarning` when a step fails.
+        clip_reset_to_joint_limits: Clip the reset ``qpos`` into the joint ranges (module
+            docstring).
+
+    Subclasses implement ``_get_obs()``, ``_reset_model()`` and ``_reward(before, action)``.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 50}
+    #: renderer camera: projection plane and tracked body (None: fixed at the origin)
+    _view: tuple[str, int | None, float] = ("xz", None, 1.0)
+
+    def __init__(
+        self,
+        xml_file: str,
+        frame_skip: int,
+        *,
+        timestep: float | None = None,
+        solver_options: dict[str, Any] | None = None,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+        warn_on_solver_failure: bool = True,
+        clip_reset_to_joint_limits: bool = True,
+    ) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"`render_mode` must be None or 'rgb_array', got {render_mode!r}")
+        if int(frame_skip) < 1:
+            raise ValueError(f"`frame_skip` must be >= 1, got {frame_skip!r}")
+        self.fullpath = str(asset_path(xml_file))
+        options = tuple(sorted((solver_options or {}).items()))
+        self.model = load_model(self.fullpath, timestep, options)
+        self.frame_skip = int(frame_skip)
+        self.render_mode = render_mode
+        self.width, self.height = int(width), int(height)
+        self.warn_on_solver_failure = warn_on_solver_failure
+        self.clip_reset_to_joint_limits = clip_reset_to_joint_limits
+        self._info = mjcf_info(self.fullpath)
+        self._body_index = {n: i for i, n in enumerate(self.model.body_names)}
+        self.init_qpos = np.array(self.model.qpos0, dtype=np.float64)
+        self.init_qvel = np.zeros(self.model.nv)
+        self._x = np.concatenate([self.init_qpos, self.init_qvel])
+        self._state = None
+        low, high = np.asarray(self.model.actuator_ctrlrange, dtype=np.float32).T
+        self.action_space = spaces.Box(low=low, high=high, dtype=np.float32)
+        self.metadata = {"render_modes": ["rgb_array"], "render_fps": int(np.round(1.0 / self.dt))}
+        n = self._get_obs().size
+        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(n,), dtype=np.float64)
+
+    # -- MujocoEnv-compatible state access -------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Time of one env step (s): ``timestep * frame_skip``."""
+        return self.model.timestep * self.frame_skip
+
+    @property
+    def qpos(self) -> np.ndarray:
+        """Generalized positions (nq,), MuJoCo's layout (read-only view)."""
+        v = self._x[: self.model.nq]
+        v.flags.writeable = False
+        return v
+
+    @property
+    def qvel(self) -> np.ndarray:
+        """Generalized velocities (nv,), MuJoCo's layout (read-only view)."""
+        v = self._x[self.model.nq :]
+        v.flags.writeable = False
+        return v
+
+    def state_vector(self) -> np.ndarray:
+        """``[qpos, qvel]`` (nq + nv,), a copy."""
+        return self._x.copy()
+
+    def set_state(self, qpos, qvel) -> None:
+        """Set the state from MuJoCo-layout ``qpos`` (nq,) and ``qvel`` (nv,)."""
+        qpos, qvel = np.asarray(qpos, np.float64), np.asarray(qvel, np.float64)
+        if qpos.shape != (self.model.nq,) or qvel.shape != (self.model.nv,):
+            raise ValueError(f"set_state: expected qpos ({self.model.nq},) and qvel ({self.model.nv},), "
+                             f"got {qpos.shape} and {qvel.shape}")
+        self._set_x(np.concatenate([qpos, qvel]))
+
+    def _set_x(self, x: np.ndarray) -> None:
+        self._x = np.array(x, dtype=np.float64)
+        self._state = None
+
+    @property
+    def state(self):
+        """The full ``ukemi.State`` of the current ``(qpos, qvel)``, built on demand."""
+        if self._state is None:
+            nq = self.model.nq
+            self._state = self.model.make_state(self._x[:nq], self._x[nq:])
+        return self._state
+
+    def body_xpos(self, name: str) -> np.ndarray:
+        """World position of a body frame (MuJoCo's ``data.body(name).xpos``), (3,)."""
+        return self.state.body_pos[self._body_index[name]]
+
+    def site_xpos(self, name: str) -> np.ndarray:
+        """World position of an MJCF site (MuJoCo's ``data.site(name).xpos``), (3,)."""
+        body, local = self._info.sites[name]
+        s = self.state
+        return s.body_pos[body] + rotate(s.body_quat[body], local)
+
+    # -- gymnasium API ----------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        self._set_x(np.concatenate([self.init_qpos, self.init_qvel]))
+        self._reset_model()
+        if self.clip_reset_to_joint_limits:
+            self._set_x(np.concatenate([self._clip_to_joint_limits(self.qpos), self.qvel]))
+        return self._get_obs(), self._reset_info()
+
+    def step(self, action):
+        action = self._check_action(action)
+        before = self._snapshot()
+        x_next, status = simulate(self.model, self._x[None], action[None], self.frame_skip)
+        return self._after_physics(action, before, x_next[0], status[0])
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        return _render.render_frame(self)
+
+    def _clip_to_joint_limits(self, qpos: np.ndarray) -> np.ndarray:
+        """``qpos`` with every limited hinge/slide coordinate clipped into its range."""
+        m, qpos = self.model, np.array(qpos)
+        ranges = np.asarray(m.dof_range)
+        if m.nq == m.nv:
+            return np.clip(qpos, ranges[:, 0], ranges[:, 1])
+        if m.nq == m.nv + 1 and m.joint_kinds[0] == "floating":  # free joint first (Ant)
+            qpos[7:] = np.clip(qpos[7:], ranges[6:, 0], ranges[6:, 1])
+        return qpos
+
+    # -- pieces shared with the vector env --------------------------------------------------
+    def _check_action(self, action) -> np.ndarray:
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (self.model.nu,):
+            raise ValueError(f"Action dimension mismatch. Expected {(self.model.nu,)}, found {a.shape}")
+        return a
+
+    def _after_physics(self, action: np.ndarray, before: Any, x_next: np.ndarray, status: str):
+        if status != "converged":
+            if self.warn_on_solver_failure:
+                warnings.warn(f"{type(self).__name__}: the solve failed ({status}) at t-step of "
+                              f"{self.dt:g} s; episode truncated at the last converged state",
+                              SolverFailureWarning, stacklevel=3)
+            return self._get_obs(), 0.0, False, True, {"solver_status": status}
+        self._set_x(x_next)
+        reward, terminated, info = self._reward(before, action)
+        info["solver_status"] = status
+        return self._get_obs(), float(reward), bool(terminated), False, info
+
+    # -- task hooks -------------------------------------------------------------------------
+    def _snapshot(self) -> Any:
+        """What the reward needs from the state before the step (default: qpos copy)."""
+        return self._x[: self.model.nq].copy()
+
+    def _get_obs(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def _reset_model(self) -> None:
+        raise NotImplementedError
+
+    def _reward(self, before: Any, action: np.ndarray) -> tuple[float, bool, dict[str, Any]]:
+        raise NotImplementedError
+
+    def _reset_info(self) -> dict[str, Any]:
+        return {}
+
+    def _uniform(self, scale: float, n: int) -> np.ndarray:
+        return self.np_random.uniform(low=-scale, high=scale, size=n)
