@@ -97,16 +97,29 @@ def backend() -> str:
 
 # ----------------------------------------------------------------------------------- inputs
 def _f64(name, a, convert):
+    """float64 array (jax arrays and tracers pass through; numpy stays numpy: the jitted
+    kernel takes either, and eager calls skip a dispatch)."""
     dt = getattr(a, "dtype", None)
     if dt is None:
-        return jnp.asarray(a, jnp.float64)
-    if dt != jnp.float64:
+        return np.asarray(a, np.float64)
+    if dt != np.float64:
         if not convert:
             raise TypeError(
                 f"ukemi.jax: `{name}` has dtype {dt}; ukemi computes in float64. Pass float64 "
                 f"arrays (ukemi.jax enables jax_enable_x64), or convert=True to upcast.")
         return jnp.asarray(a).astype(jnp.float64)
-    return jnp.asarray(a)
+    return a
+
+
+def _bcast(a, shape):
+    if a.shape == shape:
+        return a
+    return jnp.broadcast_to(a, shape)
+
+
+@functools.lru_cache(maxsize=64)
+def _empty(lead):
+    return np.zeros(lead + (0,), np.float64)
 
 
 def _prep(model, x, u, params, kappa_grad, convert, names):
@@ -114,15 +127,28 @@ def _prep(model, x, u, params, kappa_grad, convert, names):
         raise RuntimeError("ukemi.jax needs jax_enable_x64 (it was disabled after import)")
     k = resolve_kappa(model, kappa_grad)
     x = _f64(names[0], x, convert)
-    u = _f64(names[1], u, convert) if u is not None else jnp.zeros(model.nu, jnp.float64)
+    u = _f64(names[1], u, convert) if u is not None else np.zeros(model.nu)
     p = None if params is None else _f64("params", params, convert)
     return k, x, u, p
 
 
+@functools.lru_cache(maxsize=None)
+def _sizes(model):
+    return _flat.sizes(model)
+
+
+def _lead(leads):
+    first = leads[0]
+    if all(lead == first for lead in leads):
+        return tuple(first)
+    return tuple(np.broadcast_shapes(*leads))
+
+
 def _check(name, a, tail):
-    if a.ndim < len(tail) or a.shape[a.ndim - len(tail):] != tuple(tail):
+    shape = a.shape
+    if len(shape) < len(tail) or shape[len(shape) - len(tail):] != tuple(tail):
         want = ", ".join(str(t) for t in tail)
-        raise ShapeError(f"shape of `{name}`: expected (..., {want}), got {a.shape}")
+        raise ShapeError(f"shape of `{name}`: expected (..., {want}), got {shape}")
 
 
 def _kappa_attr(k):
@@ -243,18 +269,17 @@ def step(model, x, u=None, params=None, kappa_grad=3e-4, *, convert=False):
     ``JaxRuntimeError`` on the FFI backend (eagerly and under ``jit``), or through JAX's
     callback machinery on the callback backend."""
     k, x, u, p = _prep(model, x, u, params, kappa_grad, convert, ("x", "u"))
-    nx, nu, npar = _flat.sizes(model)
+    nx, nu, npar = _sizes(model)
     _check("x", x, (nx,))
     _check("u", u, (nu,))
     leads = [x.shape[:-1], u.shape[:-1]]
     if p is not None:
         _check("params", p, (npar,))
         leads.append(p.shape[:-1])
-    lead = jnp.broadcast_shapes(*leads)
-    x = jnp.broadcast_to(x, lead + (nx,))
-    u = jnp.broadcast_to(u, lead + (nu,))
+    lead = _lead(leads)
+    x, u = _bcast(x, lead + (nx,)), _bcast(u, lead + (nu,))
     with_params = p is not None
-    p = jnp.broadcast_to(p, lead + (npar,)) if with_params else jnp.zeros(lead + (0,), jnp.float64)
+    p = _bcast(p, lead + (npar,)) if with_params else _empty(lead)
     return _step_fn(model, k, with_params, backend())(x, u, p)
 
 
@@ -263,7 +288,7 @@ def rollout(model, x0, us, params=None, kappa_grad=3e-4, *, convert=False):
     (..., T + 1, nq + nv), computed in Rust in one call; the backward pass is the engine's
     reverse sweep (``ukemi.rollout_vjp``). Same dtype rules and errors as :func:`step`."""
     k, x0, us, p = _prep(model, x0, us, params, kappa_grad, convert, ("x0", "us"))
-    nx, nu, npar = _flat.sizes(model)
+    nx, nu, npar = _sizes(model)
     _check("x0", x0, (nx,))
     if us.ndim < 2 or us.shape[-1] != nu:
         raise ShapeError(f"shape of `us`: expected (..., T, {nu}), got {us.shape}")
@@ -272,9 +297,8 @@ def rollout(model, x0, us, params=None, kappa_grad=3e-4, *, convert=False):
     if p is not None:
         _check("params", p, (npar,))
         leads.append(p.shape[:-1])
-    lead = jnp.broadcast_shapes(*leads)
-    x0 = jnp.broadcast_to(x0, lead + (nx,))
-    us = jnp.broadcast_to(us, lead + (t, nu))
+    lead = _lead(leads)
+    x0, us = _bcast(x0, lead + (nx,)), _bcast(us, lead + (t, nu))
     with_params = p is not None
-    p = jnp.broadcast_to(p, lead + (npar,)) if with_params else jnp.zeros(lead + (0,), jnp.float64)
+    p = _bcast(p, lead + (npar,)) if with_params else _empty(lead)
     return _rollout_fn(model, k, with_params, backend())(x0, us, p)
