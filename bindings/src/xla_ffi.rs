@@ -891,6 +891,121 @@ mod tests {
 
     use super::abi::*;
 
+    use super::{Fail, Frame, entry};
+
+    thread_local! {
+        static LAST: std::cell::RefCell<Option<(i32, String)>> = const { std::cell::RefCell::new(None) };
+    }
+
+    /// A stand-in for XLA's `XLA_FFI_Error_Create`: records the code and message.
+    unsafe extern "C" fn fake_create(args: *mut XLA_FFI_Error_Create_Args) -> *mut XLA_FFI_Error {
+        let a = unsafe { &*args };
+        let msg = unsafe { std::ffi::CStr::from_ptr(a.message) }
+            .to_string_lossy()
+            .into_owned();
+        LAST.with(|l| *l.borrow_mut() = Some((a.errc, msg)));
+        std::ptr::NonNull::<XLA_FFI_Error>::dangling().as_ptr()
+    }
+
+    fn run(body: fn(&Frame) -> Result<(), Fail>) -> (bool, Option<(i32, String)>) {
+        let null = std::ptr::null_mut();
+        let api = XLA_FFI_Api {
+            struct_size: API_PREFIX_SIZE,
+            extension_start: null,
+            api_version: XLA_FFI_Api_Version {
+                struct_size: API_VERSION_STRUCT_SIZE,
+                extension_start: null,
+                major_version: API_MAJOR,
+                minor_version: API_MINOR,
+            },
+            internal_api: std::ptr::null(),
+            error_create: Some(fake_create),
+        };
+        let empty_args = XLA_FFI_Args {
+            struct_size: size_of::<XLA_FFI_Args>(),
+            extension_start: null,
+            size: 0,
+            types: std::ptr::null(),
+            args: std::ptr::null(),
+        };
+        let mut frame = XLA_FFI_CallFrame {
+            struct_size: CALL_FRAME_STRUCT_SIZE,
+            extension_start: null,
+            api: &api,
+            ctx: std::ptr::null_mut(),
+            stage: STAGE_EXECUTE,
+            args: empty_args,
+            rets: XLA_FFI_Rets {
+                struct_size: size_of::<XLA_FFI_Rets>(),
+                extension_start: null,
+                size: 0,
+                types: std::ptr::null(),
+                rets: std::ptr::null(),
+            },
+            attrs: XLA_FFI_Attrs {
+                struct_size: size_of::<XLA_FFI_Attrs>(),
+                extension_start: null,
+                size: 0,
+                types: std::ptr::null(),
+                names: std::ptr::null(),
+                attrs: std::ptr::null(),
+            },
+            future: std::ptr::null_mut(),
+        };
+        LAST.with(|l| *l.borrow_mut() = None);
+        let err = unsafe { entry(&mut frame, body) };
+        (err.is_null(), LAST.with(|l| l.borrow_mut().take()))
+    }
+
+    #[test]
+    fn panics_and_failures_become_ffi_errors_and_metadata_is_reported() {
+        let (ok, last) = run(|_| Ok(()));
+        assert!(ok && last.is_none());
+        let (ok, last) = run(|_| panic!("boom"));
+        let (code, msg) = last.expect("an error was created");
+        assert!(!ok && code == ERR_INTERNAL && msg.contains("boom"), "{msg}");
+        // a missing attribute and missing arguments are reported, not read out of bounds
+        let (_, last) = run(|f| f.flag("with_params").map(|_| ()));
+        assert!(last.unwrap().1.contains("missing attribute `with_params`"));
+        let (_, last) = run(|f| f.counts(4, 1));
+        assert!(last.unwrap().1.contains("expected 4 arguments"));
+    }
+
+    #[test]
+    fn metadata_probe_reports_api_version() {
+        let mut md = XLA_FFI_Metadata {
+            struct_size: size_of::<XLA_FFI_Metadata>(),
+            api_version: XLA_FFI_Api_Version {
+                struct_size: 0,
+                extension_start: std::ptr::null_mut(),
+                major_version: -1,
+                minor_version: -1,
+            },
+            traits: 7,
+            state_type_id: 9,
+        };
+        let mut ext = XLA_FFI_Metadata_Extension {
+            extension_base: XLA_FFI_Extension_Base {
+                struct_size: METADATA_EXTENSION_STRUCT_SIZE,
+                type_: EXTENSION_METADATA,
+                next: std::ptr::null_mut(),
+            },
+            metadata: &mut md,
+        };
+        let err = unsafe {
+            super::populate_metadata(
+                std::ptr::null(),
+                &mut ext as *mut XLA_FFI_Metadata_Extension,
+            )
+        };
+        assert!(err.is_null());
+        assert_eq!(
+            (md.api_version.major_version, md.api_version.minor_version),
+            (0, 3)
+        );
+        assert_eq!((md.traits, md.state_type_id), (0, 0));
+    }
+
     #[test]
     fn abi_layout_matches_c_api_h_on_64_bit() {
         assert_eq!(size_of::<usize>(), 8, "layouts below assume LP64");
