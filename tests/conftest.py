@@ -31,3 +31,32 @@ def free_body():
     b.add_body("box", mass=2.0, inertia=inertia, pos=(0, 0, 1))
     b.add_joint("free", kind="floating", parent="world", child="box")
     return b.compile()
+
+
+def arm():
+    """Floating box with a hinged arm: a quaternion in the flat state, two motors."""
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_body("base", mass=2.0, inertia=(0.2, 0.3, 0.25), pos=(0, 0, 1))
+    b.add_body("arm", mass=0.5, inertia=(0.01, 0.02, 0.02), pos=(0.3, 0, 1))
+    b.add_joint("root", kind="floating", parent="world", child="base")
+    b.add_joint("elbow", kind="revolute", parent="base", child="arm", axis=(0, 1, 0),
+                parent_anchor=(0.15, 0, 0), child_anchor=(-0.15, 0, 0), damping=0.05)
+    b.add_actuator("elbow_motor", joint="elbow", gear=2.0)
+    b.add_actuator("root_x", joint="root", gear=1.0)
+    return b.compile().with_options(rtol=1e-14, max_iter=100)
+
+
+def ball_on_floor():
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("floor", body="world", shape="plane", friction=0.5)
+    b.add_body("ball", mass=1.0, inertia=(0.004, 0.004, 0.004), pos=(0, 0, 0.1))
+    b.add_joint("free", kind="floating", parent="world", child="ball")
+    b.add_geom("ball", body="ball", shape="sphere", size=(0.1,), friction=0.5)
+    b.add_actuator("push_x", joint="free", gear=1.0)
+    return b.compile().with_options(rtol=1e-14, max_iter=100)
+
+
+def x0_of(model, qvel_scale=0.5):
+    s = model.make_state()
+    rng = np.random.default_rng(1)
+    return np.concatenate([s.qpos, qvel_scale * rng.normal(size=model.nv)])

@@ -219,7 +219,7 @@ pub fn rollout_vjp_py<'py>(
 }
 
 /// One model, or one per batch element when `params` (B, nparams) is given.
-fn models_for(
+pub(crate) fn models_for(
     model: &Model,
     params: Option<&[f64]>,
     batch: usize,

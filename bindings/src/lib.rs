@@ -5,6 +5,7 @@ mod mjcf;
 mod model;
 mod state;
 mod step;
+mod xla_ffi;
 
 use pyo3::prelude::*;
 
@@ -28,6 +29,9 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gradients::flat_rollout_vjp, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::get_num_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(xla_ffi::capsules, m)?)?;
+    m.add_function(wrap_pyfunction!(xla_ffi::model_handle, m)?)?;
+    m.add_function(wrap_pyfunction!(xla_ffi::release_model_handle, m)?)?;
     let kinds: Vec<&str> = ukemi_engine::JointKind::ALL
         .iter()
         .map(|k| k.name())
