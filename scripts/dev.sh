@@ -39,8 +39,9 @@ case "$cmd" in
     cargo fmt --all -- --check
     log "cargo clippy (workspace, warnings are errors)"
     cargo clippy --workspace --release --all-targets --quiet -- -D warnings
-    log "cargo test (engine, release profile)"
+    log "cargo test (engine + bindings' Rust tests, release profile)"
     cargo test --release --quiet
+    cargo test --release --quiet -p ukemi-py --lib
     log "pytest"
     "$VENV/bin/python" -m pytest -q "$@"
     ;;
