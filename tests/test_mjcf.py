@@ -156,8 +156,10 @@ def test_load_dispatches_on_suffix(tmp_path):
     assert m.nq == 2
     urdf = tmp_path / "r.urdf"
     urdf.write_text("<robot/>")
-    with pytest.raises(ukemi.UnsupportedError):
+    with pytest.raises(ukemi.UrdfError, match="no <link>"):
         ukemi.load(urdf)
+    with pytest.raises(ukemi.UnsupportedError, match="suffix"):
+        ukemi.load(tmp_path / "r.sdf")
     with pytest.raises(ukemi.MjcfError, match="cannot read"):
         ukemi.load(tmp_path / "missing.xml")
 

@@ -12,6 +12,7 @@ pyo3::import_exception!(ukemi.errors, ModelMismatchError);
 pyo3::import_exception!(ukemi.errors, UnsupportedError);
 pyo3::import_exception!(ukemi.errors, InternalError);
 pyo3::import_exception!(ukemi.errors, MjcfError);
+pyo3::import_exception!(ukemi.errors, UrdfError);
 pyo3::import_exception!(ukemi.errors, ConvergenceError);
 
 /// One exhaustive mapping: adding an engine variant does not compile until it is mapped here.
@@ -24,6 +25,7 @@ pub fn to_py(e: Error) -> PyErr {
         Error::ModelMismatch { .. } => ModelMismatchError::new_err(msg),
         Error::Unsupported(_) => UnsupportedError::new_err(msg),
         Error::Mjcf { .. } => MjcfError::new_err(msg),
+        Error::Urdf { .. } => UrdfError::new_err(msg),
         Error::NotConverged { .. } => ConvergenceError::new_err(msg),
     }
 }

@@ -1,25 +1,32 @@
-//! MJCF loading: `Model.from_xml_path` / `Model.from_xml_string`. Warnings about ignored
-//! features are issued as Python `UserWarning`s.
+//! MJCF and URDF loading: `Model.from_xml_path` / `Model.from_xml_string` /
+//! `Model.from_urdf_path` / `Model.from_urdf_string`. Warnings about ignored features are issued
+//! as Python `UserWarning`s.
 use std::path::Path;
 use std::sync::Arc;
 
 use pyo3::prelude::*;
 use ukemi_engine::mjcf::{self, MjcfModel};
+use ukemi_engine::urdf::{self, UrdfModel};
 
 use crate::errors::{IntoPy, guard};
 use crate::model::PyModel;
 
 fn finish(py: Python<'_>, loaded: ukemi_engine::Result<MjcfModel>) -> PyResult<PyModel> {
     let loaded = loaded.py()?;
+    warn_all(py, &loaded.warnings)?;
+    Ok(PyModel {
+        inner: Arc::new(loaded.model),
+    })
+}
+
+fn warn_all(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
     let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
-    for w in &loaded.warnings {
+    for w in warnings {
         let msg = std::ffi::CString::new(w.replace('\0', " "))
             .unwrap_or_else(|_| c"ukemi MJCF warning".to_owned());
         PyErr::warn(py, &category, &msg, 2)?;
     }
-    Ok(PyModel {
-        inner: Arc::new(loaded.model),
-    })
+    Ok(())
 }
 
 /// Load an MJCF file.
@@ -35,5 +42,39 @@ pub fn from_string(py: Python<'_>, xml: &str) -> PyResult<PyModel> {
     guard(|| {
         let loaded = py.detach(|| mjcf::load_str(xml, "<string>"));
         finish(py, loaded)
+    })
+}
+
+fn finish_urdf(py: Python<'_>, loaded: ukemi_engine::Result<UrdfModel>) -> PyResult<PyModel> {
+    let loaded = loaded.py()?;
+    warn_all(py, &loaded.warnings)?;
+    Ok(PyModel {
+        inner: Arc::new(loaded.model),
+    })
+}
+
+/// Load a URDF file with a floating or fixed base.
+pub fn from_urdf_path(py: Python<'_>, path: &str, floating: bool) -> PyResult<PyModel> {
+    guard(|| {
+        let loaded = py.detach(|| urdf::load_path(Path::new(path), floating));
+        finish_urdf(py, loaded)
+    })
+}
+
+/// Load URDF text with a floating or fixed base.
+pub fn from_urdf_string(py: Python<'_>, xml: &str, floating: bool) -> PyResult<PyModel> {
+    guard(|| {
+        let loaded = py.detach(|| urdf::load_str(xml, "<string>", floating));
+        finish_urdf(py, loaded)
+    })
+}
+
+/// The MJCF document a URDF translates to (for inspection).
+pub fn urdf_to_mjcf(py: Python<'_>, xml: &str, floating: bool) -> PyResult<String> {
+    guard(|| {
+        let loaded = py
+            .detach(|| urdf::load_str(xml, "<string>", floating))
+            .py()?;
+        Ok(loaded.mjcf)
     })
 }

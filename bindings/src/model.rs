@@ -330,6 +330,62 @@ impl PyModel {
             .map(|k| k.name.clone())
             .collect()
     }
+    /// Keyframe positions, shape (nkey, nq) (MuJoCo's `key_qpos`).
+    #[getter]
+    fn key_qpos<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let flat: Vec<f64> = self
+            .inner
+            .keyframes
+            .iter()
+            .flat_map(|k| k.qpos.clone())
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([self.inner.keyframes.len(), self.inner.nq])
+    }
+    /// Keyframe velocities, shape (nkey, nv) (MuJoCo's `key_qvel`).
+    #[getter]
+    fn key_qvel<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let flat: Vec<f64> = self
+            .inner
+            .keyframes
+            .iter()
+            .flat_map(|k| k.qvel.clone())
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([self.inner.keyframes.len(), self.inner.nv])
+    }
+    /// Keyframe controls, shape (nkey, nu) (MuJoCo's `key_ctrl`).
+    #[getter]
+    fn key_ctrl<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let flat: Vec<f64> = self
+            .inner
+            .keyframes
+            .iter()
+            .flat_map(|k| k.ctrl.clone())
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([self.inner.keyframes.len(), self.inner.nu()])
+    }
+    /// Load a URDF file: `floating=True` gives the root link a free joint, `False` fixes it to
+    /// the world (warnings about ignored features become `UserWarning`s).
+    #[staticmethod]
+    #[pyo3(signature = (path, floating=true))]
+    fn from_urdf_path(
+        py: Python<'_>,
+        path: std::path::PathBuf,
+        floating: bool,
+    ) -> PyResult<PyModel> {
+        crate::mjcf::from_urdf_path(py, &path.to_string_lossy(), floating)
+    }
+    /// Load URDF text (see `from_urdf_path`).
+    #[staticmethod]
+    #[pyo3(signature = (xml, floating=true))]
+    fn from_urdf_string(py: Python<'_>, xml: &str, floating: bool) -> PyResult<PyModel> {
+        crate::mjcf::from_urdf_string(py, xml, floating)
+    }
+    /// The MJCF document that URDF text translates to (fixed joints merged), for inspection.
+    #[staticmethod]
+    #[pyo3(signature = (xml, floating=true))]
+    fn urdf_to_mjcf(py: Python<'_>, xml: &str, floating: bool) -> PyResult<String> {
+        crate::mjcf::urdf_to_mjcf(py, xml, floating)
+    }
     /// Load an MJCF file (warnings about ignored features become `UserWarning`s).
     #[staticmethod]
     fn from_xml_path(py: Python<'_>, path: std::path::PathBuf) -> PyResult<PyModel> {

@@ -284,6 +284,7 @@ impl From<Error> for Fail {
             Error::ModelMismatch { .. } => ("ModelMismatchError", ERR_INVALID_ARGUMENT),
             Error::Unsupported(_) => ("UnsupportedError", ERR_INVALID_ARGUMENT),
             Error::Mjcf { .. } => ("MjcfError", ERR_INVALID_ARGUMENT),
+            Error::Urdf { .. } => ("UrdfError", ERR_INVALID_ARGUMENT),
             Error::NotConverged { .. } => ("ConvergenceError", ERR_FAILED_PRECONDITION),
         };
         Fail {

@@ -54,6 +54,16 @@ pub enum Error {
         /// What is wrong: element, attribute and bad value.
         msg: String,
     },
+    /// A URDF document is malformed or has an invalid value.
+    #[error("URDF {source_name}:{line}: {msg}")]
+    Urdf {
+        /// File path or `<string>`.
+        source_name: String,
+        /// 1-based line of the offending element (0 when unknown).
+        line: usize,
+        /// What is wrong: element, attribute and bad value.
+        msg: String,
+    },
     /// A solve that a result depends on (a gradient's step or its central-path point) did not
     /// converge, so no valid result exists.
     #[error(

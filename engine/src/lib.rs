@@ -37,6 +37,7 @@ pub mod model;
 pub mod solver;
 pub mod state;
 pub mod step;
+pub mod urdf;
 
 pub use contact::ContactModel;
 pub use contact::geometry::Shape;

@@ -16,7 +16,7 @@ Maximal-coordinate rigid-body dynamics with a variational integrator and joints 
 
 from __future__ import annotations
 
-from . import _ukemi
+from . import _ukemi, models
 from ._builder import JOINT_KINDS, ModelBuilder
 from ._loaders import gymnasium_asset_path, load
 from ._gradients import StepJacobians, rollout_vjp, step_jacobians, step_jvp, step_vjp
@@ -32,6 +32,7 @@ from .errors import (
     ShapeError,
     UkemiError,
     UnsupportedError,
+    UrdfError,
 )
 
 __version__: str = _ukemi.__version__
@@ -55,8 +56,10 @@ __all__ = [
     "UkemiError",
     "UnsupportedError",
     "get_num_threads",
+    "UrdfError",
     "gymnasium_asset_path",
     "load",
+    "models",
     "rollout",
     "rollout_vjp",
     "set_num_threads",

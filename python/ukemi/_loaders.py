@@ -1,7 +1,7 @@
 """Model loaders: ``ukemi.load`` (dispatch on the file suffix) and gymnasium's MJCF assets.
 
-``ukemi.Model.from_xml_path`` and ``ukemi.Model.from_xml_string`` are implemented in the
-extension; features the loader ignores are reported with :func:`warnings.warn`.
+``ukemi.Model.from_xml_path``, ``from_xml_string``, ``from_urdf_path`` and ``from_urdf_string``
+are implemented in the extension; features the loader ignores are reported with :func:`warnings.warn`.
 """
 
 from __future__ import annotations
@@ -19,18 +19,20 @@ _GYMNASIUM_ASSETS = (
 )
 
 
-def load(path: str | os.PathLike) -> Model:
+def load(path: str | os.PathLike, floating: bool = True) -> Model:
     """Load a model file, choosing the format by its suffix.
 
     Args:
         path: An MJCF file (``.xml``, ``.mjcf``) or a URDF file (``.urdf``).
+        floating: URDF only: give the root link a free joint (``True``) or fix it to the world.
 
     Returns:
         ukemi.Model
 
     Raises:
-        MjcfError: the file is missing, malformed, or has an invalid value (the message names
-            the element and line).
+        MjcfError: the MJCF file is missing, malformed, or has an invalid value (the message
+            names the element and line).
+        UrdfError: the same for a URDF file.
         UnsupportedError: the model uses a feature ukemi does not support, or the suffix is
             not known.
     """
@@ -39,10 +41,7 @@ def load(path: str | os.PathLike) -> Model:
     if suffix in (".xml", ".mjcf"):
         return Model.from_xml_path(str(p))
     if suffix == ".urdf":
-        from_urdf = getattr(Model, "from_urdf_path", None)
-        if from_urdf is None:
-            raise UnsupportedError(f"unsupported: URDF loading is not available yet ({p})")
-        return from_urdf(str(p))
+        return Model.from_urdf_path(str(p), floating=floating)
     raise UnsupportedError(f"unsupported: unknown model file suffix {suffix!r} of {p} (expected .xml or .urdf)")
 
 

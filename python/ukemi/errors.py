@@ -29,7 +29,11 @@ class ModelMismatchError(UkemiError, ValueError):
 
 
 class MjcfError(UkemiError, ValueError):
-    """An MJCF or URDF file could not be loaded."""
+    """An MJCF file could not be loaded (the message names the element and line)."""
+
+
+class UrdfError(UkemiError, ValueError):
+    """A URDF file could not be loaded (the message names the element and line)."""
 
 
 class UnsupportedError(UkemiError, NotImplementedError):
@@ -57,6 +61,7 @@ __all__ = [
     "InputError",
     "ModelMismatchError",
     "MjcfError",
+    "UrdfError",
     "UnsupportedError",
     "ConvergenceError",
     "InternalError",

@@ -1,0 +1,328 @@
+"""URDF loader: hand-written URDF robots against the same robots written as MJCF and compiled by
+MuJoCo (masses, full inertias, COMs, body poses at several configurations, joint ranges, actuator
+control ranges, to 1e-9), fixed-joint merging, floating/fixed bases, and malformed files raising
+``UrdfError`` (or ``UnsupportedError``) that name the element and line."""
+
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ukemi
+
+DATA = Path(__file__).parent / "data"
+TOL = 1e-9
+
+
+def load_urdf(path_or_text, floating):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        if isinstance(path_or_text, Path):
+            return ukemi.Model.from_urdf_path(str(path_or_text), floating=floating)
+        return ukemi.Model.from_urdf_string(path_or_text, floating=floating)
+
+
+def quat_close(a, b, tol):
+    return min(np.abs(a - b).max(), np.abs(a + b).max()) < tol
+
+
+def compare(uk, mj):
+    """ukemi's model of a URDF against MuJoCo's of the MJCF twin."""
+    mujoco = pytest.importorskip("mujoco")
+    assert (uk.nq, uk.nv, uk.nu) == (mj.nq, mj.nv, mj.nu)
+    assert uk.nbody == mj.nbody, (uk.body_names, [mj.body(i).name for i in range(mj.nbody)])
+    assert uk.ngeom == mj.ngeom
+    np.testing.assert_allclose(uk.qpos0, mj.qpos0, atol=TOL)
+    for i, name in enumerate(uk.body_names[1:], start=1):
+        b = mj.body(name).id
+        np.testing.assert_allclose(uk.body_mass[i], mj.body_mass[b], rtol=TOL,
+                                   err_msg=f"body_mass[{name}]")
+        r = np.zeros(9)
+        mujoco.mju_quat2Mat(r, mj.body_iquat[b])
+        r = r.reshape(3, 3)
+        full = r @ np.diag(mj.body_inertia[b]) @ r.T
+        np.testing.assert_allclose(uk.body_inertia[i], full, atol=TOL * np.abs(full).max(),
+                                   err_msg=f"body_inertia[{name}]")
+        np.testing.assert_allclose(uk.body_com[i], mj.body_ipos[b], atol=TOL,
+                                   err_msg=f"body_com[{name}]")
+    lim = np.full((mj.nv, 2), [-np.inf, np.inf])
+    for j in range(mj.njnt):
+        if mj.jnt_limited[j]:
+            lim[mj.jnt_dofadr[j]] = mj.jnt_range[j]
+    np.testing.assert_allclose(uk.dof_range, lim, atol=TOL, err_msg="dof_range")
+    np.testing.assert_allclose(uk.actuator_gear, mj.actuator_gear[:, 0], rtol=TOL)
+    ctrl = np.where(mj.actuator_ctrllimited[:, None] > 0, mj.actuator_ctrlrange,
+                    [-np.inf, np.inf])
+    np.testing.assert_allclose(uk.actuator_ctrlrange, ctrl, atol=TOL, err_msg="ctrlrange")
+    rng = np.random.default_rng(0)
+    d = mujoco.MjData(mj)
+    for trial in range(6):
+        q = mj.qpos0.copy()
+        if trial:
+            for j in range(mj.njnt):
+                a = mj.jnt_qposadr[j]
+                if mj.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+                    q[a:a + 3] += rng.normal(size=3) * 0.3
+                    v = rng.normal(size=4)
+                    q[a + 3:a + 7] = v / np.linalg.norm(v)
+                else:
+                    lo, hi = mj.jnt_range[j] if mj.jnt_limited[j] else (-2.0, 2.0)
+                    q[a] = rng.uniform(lo, hi)
+        d.qpos[:] = q
+        mujoco.mj_kinematics(mj, d)
+        state = uk.make_state(qpos=q)
+        for i, name in enumerate(uk.body_names[1:], start=1):
+            b = mj.body(name).id
+            np.testing.assert_allclose(state.body_pos[i], d.xpos[b], atol=TOL,
+                                       err_msg=f"config {trial}: body_pos[{name}]")
+            assert quat_close(state.body_quat[i], d.xquat[b], TOL), f"config {trial}: {name}"
+
+
+def test_arm_matches_mjcf_twin():
+    mujoco = pytest.importorskip("mujoco")
+    uk = load_urdf(DATA / "arm2.urdf", floating=False)
+    assert uk.body_names == ["world", "upper", "fore"]  # tool merged into fore, base = world
+    assert uk.joint_names == ["shoulder", "elbow"]
+    assert uk.actuator_names == ["shoulder", "elbow"]
+    mj = mujoco.MjModel.from_xml_path(str(DATA / "arm2.xml"))
+    compare(uk, mj)
+
+
+def test_load_dispatches_on_suffix():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = ukemi.load(DATA / "arm2.urdf", floating=False)
+    assert m.nq == 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = ukemi.load(DATA / "arm2.urdf")  # floating by default: the base gets a free joint
+    assert (m.nq, m.nv) == (9, 8)
+    assert m.body_names[1] == "base"
+
+
+# ---------------------------------------------------------------- a small quadruped, generated
+
+LEGS = {"FR": (0.2, -0.1), "FL": (0.2, 0.1), "RR": (-0.2, -0.1), "RL": (-0.2, 0.1)}
+
+
+def quadruped_urdf():
+    legs = []
+    for leg, (x, y) in LEGS.items():
+        legs.append(f"""
+  <link name="{leg}_hip">
+    <inertial><origin xyz="0 {0.3 * y} 0" rpy="0.1 0 0.2"/><mass value="0.6"/>
+      <inertia ixx="0.0005" iyy="0.0007" izz="0.0006" ixy="0.00001" ixz="0" iyz="0.00002"/></inertial>
+  </link>
+  <link name="{leg}_thigh">
+    <inertial><origin xyz="0 0 -0.1"/><mass value="1.0"/>
+      <inertia ixx="0.005" iyy="0.005" izz="0.0008"/></inertial>
+    <collision><origin xyz="0 0 -0.1"/><geometry><capsule radius="0.02" length="0.16"/></geometry></collision>
+  </link>
+  <link name="{leg}_calf">
+    <inertial><origin xyz="0 0 -0.1"/><mass value="0.2"/>
+      <inertia ixx="0.001" iyy="0.001" izz="0.0001"/></inertial>
+  </link>
+  <link name="{leg}_foot">
+    <inertial><mass value="0.05"/><inertia ixx="1e-5" iyy="1e-5" izz="1e-5"/></inertial>
+    <collision><geometry><sphere radius="0.02"/></geometry></collision>
+  </link>
+  <joint name="{leg}_hip_joint" type="revolute">
+    <parent link="trunk"/><child link="{leg}_hip"/><origin xyz="{x} {y} 0"/>
+    <axis xyz="1 0 0"/><limit lower="-0.8" upper="0.8" effort="20" velocity="20"/>
+  </joint>
+  <joint name="{leg}_thigh_joint" type="revolute">
+    <parent link="{leg}_hip"/><child link="{leg}_thigh"/><origin xyz="0 {0.8 * y} 0"/>
+    <axis xyz="0 1 0"/><limit lower="-1" upper="3" effort="20" velocity="20"/>
+    <dynamics damping="0.1" friction="0"/>
+  </joint>
+  <joint name="{leg}_calf_joint" type="revolute">
+    <parent link="{leg}_thigh"/><child link="{leg}_calf"/><origin xyz="0 0 -0.2"/>
+    <axis xyz="0 1 0"/><limit lower="-2.7" upper="-0.9" effort="30" velocity="20"/>
+  </joint>
+  <joint name="{leg}_foot_fixed" type="fixed">
+    <parent link="{leg}_calf"/><child link="{leg}_foot"/><origin xyz="0 0 -0.2"/>
+  </joint>""")
+    return f"""<?xml version="1.0"?>
+<robot name="quad">
+  <link name="base"/>
+  <joint name="floating_base" type="fixed"><parent link="base"/><child link="trunk"/></joint>
+  <link name="trunk">
+    <inertial><origin xyz="0.01 0 0"/><mass value="6"/>
+      <inertia ixx="0.02" iyy="0.06" izz="0.07" ixy="0.0001" ixz="0.0002" iyz="0"/></inertial>
+    <collision><geometry><box size="0.4 0.2 0.1"/></geometry></collision>
+  </link>{''.join(legs)}
+</robot>"""
+
+
+def quadruped_mjcf(floating):
+    legs = []
+    for leg, (x, y) in LEGS.items():
+        legs.append(f"""
+      <body name="{leg}_hip" pos="{x} {y} 0">
+        <joint name="{leg}_hip_joint" axis="1 0 0" range="-0.8 0.8"/>
+        <inertial pos="0 {0.3 * y} 0" mass="0.6" fullinertia="{hip_inertia()}"/>
+        <body name="{leg}_thigh" pos="0 {0.8 * y} 0">
+          <joint name="{leg}_thigh_joint" axis="0 1 0" range="-1 3" damping="0.1"/>
+          <inertial pos="0 0 -0.1" mass="1" diaginertia="0.005 0.005 0.0008"/>
+          <geom type="capsule" size="0.02 0.08" pos="0 0 -0.1"/>
+          <body name="{leg}_calf" pos="0 0 -0.2">
+            <joint name="{leg}_calf_joint" axis="0 1 0" range="-2.7 -0.9"/>
+            <inertial pos="0 0 -0.1" mass="0.2" diaginertia="0.001 0.001 0.0001"/>
+            <body name="{leg}_foot" pos="0 0 -0.2">
+              <inertial pos="0 0 0" mass="0.05" diaginertia="1e-5 1e-5 1e-5"/>
+              <geom type="sphere" size="0.02"/>
+            </body>
+          </body>
+        </body>
+      </body>""")
+    motors = "".join(
+        f'<motor joint="{leg}_{j}_joint" ctrlrange="-{e} {e}"/>'
+        for leg in LEGS for j, e in (("hip", 20), ("thigh", 20), ("calf", 30)))
+    return f"""<mujoco model="quad">
+  <compiler angle="radian" eulerseq="XYZ" inertiafromgeom="false" fusestatic="true"/>
+  <worldbody>
+    <body name="base">
+      {'<freejoint/>' if floating else ''}
+      <body name="trunk">
+        <inertial pos="0.01 0 0" mass="6" fullinertia="0.02 0.06 0.07 0.0001 0.0002 0"/>
+        <geom type="box" size="0.2 0.1 0.05"/>
+      </body>{''.join(legs)}
+    </body>
+  </worldbody>
+  <actuator>{motors}</actuator>
+</mujoco>"""
+
+
+def _rpy(r, p, y):
+    cx, sx, cy, sy, cz, sz = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def hip_inertia():
+    """The hip's URDF inertia (rpy 0.1 0 0.2) in the link frame, R I Rᵀ, as MJCF fullinertia."""
+    i = np.array([[0.0005, 0.00001, 0], [0.00001, 0.0007, 0.00002], [0, 0.00002, 0.0006]])
+    r = _rpy(0.1, 0, 0.2)
+    f = r @ i @ r.T
+    return " ".join(repr(float(v)) for v in (f[0, 0], f[1, 1], f[2, 2], f[0, 1], f[0, 2], f[1, 2]))
+
+
+@pytest.mark.parametrize("floating", [True, False])
+def test_quadruped_matches_mjcf_twin(floating):
+    mujoco = pytest.importorskip("mujoco")
+    uk = load_urdf(quadruped_urdf(), floating=floating)
+    mj = mujoco.MjModel.from_xml_string(quadruped_mjcf(floating))
+    if floating:
+        assert uk.body_names[1] == "base"  # trunk merged into the massless root
+    compare(uk, mj)
+
+
+def test_quadruped_stands_on_a_floor():
+    """The floating quadruped dropped on a floor (added through the MJCF it translates to)."""
+    mjcf = ukemi.Model.urdf_to_mjcf(quadruped_urdf(), floating=True)
+    mjcf = mjcf.replace("<worldbody>", '<option timestep="0.01"/><worldbody>'
+                        '<geom name="floor" type="plane" size="5 5 0.1"/>', 1)
+    mjcf = mjcf.replace('<body name="base" pos="0 0 0"', '<body name="base" pos="0 0 0.5"', 1)
+    model = ukemi.Model.from_xml_string(mjcf)
+    q = model.qpos0.copy()
+    q[7:] = np.tile([0.0, 0.8, -1.6], 4)
+    traj = ukemi.rollout(model, model.make_state(qpos=q), nsteps=100, on_failure="return")
+    assert np.isfinite(traj.qpos).all()
+
+
+# ---------------------------------------------------------------- errors
+
+ARM = (DATA / "arm2.urdf").read_text()
+
+
+def line_of(text, needle):
+    return text[: text.index(needle)].count("\n") + 1
+
+
+@pytest.mark.parametrize(
+    "old, new, needle, match",
+    [
+        ('type="continuous"', 'type="spinning"', '<joint name="elbow"', "spinning"),
+        ('<mass value="2"/>', '<mass value="-2"/>', '<mass value="2"/>', "must be >= 0"),
+        ('<child link="fore"/>', '<child link="nowhere"/>', '<joint name="elbow"', "nowhere"),
+        ('<axis xyz="0 0.6 0.8"/>', '<axis xyz="0 0 0"/>', '<axis xyz="0 0.6 0.8"/>', "zero length"),
+        ('<axis xyz="0 1 0"/>', '<axis xyz="0 1"/>', '<axis xyz="0 1 0"/>', "xyz"),
+        ('lower="-1.5" upper="1.5"', 'lower="1.5" upper="-1.5"', 'lower="-1.5"', "lower"),
+        ('<parent link="upper"/><child link="fore"/>', '<parent link="fore"/><child link="upper"/>',
+         '<joint name="elbow"', "already has the parent joint"),
+    ],
+)
+def test_malformed_urdf_names_element_and_line(old, new, needle, match):
+    bad = ARM.replace(old, new, 1)
+    assert bad != ARM
+    with pytest.raises(ukemi.UrdfError, match=re.escape(match)) as e:
+        load_urdf(bad, floating=False)
+    assert isinstance(e.value, ValueError)
+    assert f"<string>:{line_of(ARM, needle)}:" in str(e.value), str(e.value)
+
+
+def test_collision_mesh_is_unsupported_naming_the_link():
+    bad = ARM.replace('<capsule radius="0.04" length="0.4"/>', '<mesh filename="upper.stl"/>')
+    with pytest.raises(ukemi.UnsupportedError, match=r'link "upper".*collision mesh'):
+        load_urdf(bad, floating=False)
+
+
+def test_massless_moving_link_is_an_error():
+    bad = ARM.replace('<mass value="1"/>', '<mass value="0"/>').replace(
+        '<mass value="0.3"/>', '<mass value="0"/>')
+    with pytest.raises(ukemi.UrdfError, match=r'link "fore" moves .* no mass'):
+        load_urdf(bad, floating=False)
+
+
+def test_not_a_robot_and_broken_xml():
+    with pytest.raises(ukemi.UrdfError, match=r"<string>:1: .*<robot>"):
+        load_urdf("<mujoco/>", floating=True)
+    with pytest.raises(ukemi.UrdfError, match="malformed XML"):
+        load_urdf("<robot><link name='a'></robot>", floating=True)
+    with pytest.raises(ukemi.UrdfError, match="cannot read"):
+        ukemi.Model.from_urdf_path("/nonexistent/robot.urdf")
+
+
+def test_mimic_is_unsupported():
+    bad = ARM.replace("<limit effort=\"10\"", '<mimic joint="shoulder"/><limit effort="10"')
+    with pytest.raises(ukemi.UnsupportedError, match="mimic"):
+        load_urdf(bad, floating=False)
+
+
+def test_warnings_name_what_is_ignored():
+    bad = ARM.replace('<dynamics damping="0.1"/>', '<dynamics damping="0.1" friction="0.3"/>')
+    with pytest.warns(UserWarning) as record:
+        ukemi.Model.from_urdf_string(bad, floating=False)
+    messages = [str(w.message) for w in record]
+    assert any("dry friction is ignored" in m for m in messages)
+    # warnings of the MJCF stage point at URDF lines (cylinder pairs have no collision kernel)
+    pair = next(m for m in messages if "never collide" in m)
+    assert pair.startswith("URDF <string>:"), pair
+    base_collision = line_of(ARM, '<collision><origin xyz="0 0 0.05"/>')
+    assert f"(line {base_collision})" in pair, pair
+
+
+def test_fuzzed_urdf_raises_only_ukemi_errors():
+    rng = np.random.default_rng(1)
+    tokens = ['"', "<", ">", "/", "0", "-1", "nan", "1e400", " ", "joint", "link", "x"]
+    for _ in range(300):
+        text = list(ARM)
+        for _ in range(rng.integers(1, 4)):
+            i = int(rng.integers(len(text)))
+            op = rng.integers(3)
+            if op == 0:
+                del text[i]
+            elif op == 1:
+                text.insert(i, tokens[int(rng.integers(len(tokens)))])
+            else:
+                text[i] = tokens[int(rng.integers(len(tokens)))]
+        try:
+            load_urdf("".join(text), floating=bool(rng.integers(2)))
+        except (ukemi.UrdfError, ukemi.UnsupportedError, ukemi.ModelError, ukemi.MjcfError):
+            pass
