@@ -135,7 +135,9 @@ def test_pendulum_jacobians_agree_with_mujoco_transition_fd():
         A = np.zeros((2, 2))
         B = np.zeros((2, 1))
         mujoco.mjd_transitionFD(mj, d, 1e-7, 1, A, B, None, None)
-        m = tight(pendulum(h=h))
+        # the same MJCF text, loaded by ukemi
+        m = tight(ukemi.Model.from_xml_string(xml.format(h=h)))
+        assert m.timestep == h
         jac = ukemi.step_jacobians(m, m.make_state(qpos=[0.6], qvel=[0.8]), [0.3])
         # both are I + h (...) + O(h²): compare the O(h) parts
         errs.append(np.abs(jac.A - A).max() / np.abs(A - np.eye(2)).max())

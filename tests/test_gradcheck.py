@@ -1,4 +1,4 @@
-"""torch.autograd.gradcheck on ukemi.torch.step and rollout for a pendulum, a cartpole, a box
+"""torch.autograd.gradcheck and jax check_grads on ukemi.torch / ukemi.jax steps and rollouts for a pendulum, a cartpole, a box
 sliding on the floor and gymnasium's hopper standing on the floor, with respect to state,
 controls and parameters (the contact scenes in a fixed active set, where the hard step is
 smooth, so the exact gradient, kappa_grad=None, must match finite differences)."""
@@ -118,3 +118,28 @@ def test_batch_of_64_equals_single_calls_and_threads_are_settable():
     finally:
         ukemi.set_num_threads(0)
     assert ukemi.get_num_threads() == n
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_jax_check_grads_step_and_rollout(name):
+    """The same scenes through ukemi.jax (XLA FFI backend): reverse-mode check_grads with respect
+    to state, controls and the selected parameters, for a step and a short rollout."""
+    jax = pytest.importorskip("jax")
+    from jax.test_util import check_grads
+
+    import ukemi.jax as uj
+
+    m, x0 = SCENES[name]()
+    names = list(m.param_names)
+    pick = np.array([i for i, n in enumerate(names)
+                     if n.startswith(("body_mass", "gravity[z]", "geom_friction"))])
+    base = jax.numpy.asarray(m.params)
+    full = lambda q: base.at[pick].set(q)
+    x = jax.numpy.asarray(x0)
+    u = jax.numpy.full((m.nu,), 0.1)
+    q = base[pick]
+    check_grads(lambda x, u, q: uj.step(m, x, u, params=full(q), kappa_grad=None), (x, u, q),
+                order=1, modes=["rev"], eps=1e-5, atol=1e-4, rtol=1e-4)
+    us = jax.numpy.full((3, m.nu), 0.1)
+    check_grads(lambda x, us: uj.rollout(m, x, us, kappa_grad=None), (x, us),
+                order=1, modes=["rev"], eps=1e-5, atol=1e-4, rtol=1e-4)
