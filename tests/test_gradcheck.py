@@ -1,7 +1,8 @@
-"""torch.autograd.gradcheck and jax check_grads on ukemi.torch / ukemi.jax steps and rollouts for a pendulum, a cartpole, a box
-sliding on the floor and gymnasium's hopper standing on the floor, with respect to state,
-controls and parameters (the contact scenes in a fixed active set, where the hard step is
-smooth, so the exact gradient, kappa_grad=None, must match finite differences)."""
+"""torch.autograd.gradcheck and jax check_grads on ukemi.torch / ukemi.jax steps and rollouts
+for a pendulum, a cartpole, a box sliding on the floor and gymnasium's hopper standing on the
+floor, with respect to state, controls and parameters (the contact scenes in a fixed active set,
+where the hard step is smooth, so the exact gradient, kappa_grad=None, must match finite
+differences)."""
 
 from __future__ import annotations
 
