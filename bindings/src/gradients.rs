@@ -425,3 +425,54 @@ pub fn set_num_threads(n: usize) -> PyResult<()> {
 pub fn get_num_threads() -> usize {
     flat::num_threads()
 }
+
+/// Batched raw flat-state Jacobians: `(A (B, nx, nx), B (B, nx, nu), C (B, nx, nparams))`.
+#[pyfunction]
+#[pyo3(name = "_flat_step_jacobians", signature = (model, xs, us, kappa_grad, params=None, wrt_params=false))]
+#[allow(clippy::type_complexity)]
+pub fn flat_step_jacobians<'py>(
+    py: Python<'py>,
+    model: &PyModel,
+    xs: PyReadonlyArray2<'py, f64>,
+    us: PyReadonlyArray2<'py, f64>,
+    kappa_grad: Option<f64>,
+    params: Option<PyReadonlyArray2<'py, f64>>,
+    wrt_params: bool,
+) -> PyResult<(
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray3<f64>>,
+)> {
+    guard(|| {
+        let (b, n, nu) = (xs.shape()[0], xs.shape()[1], us.shape()[1]);
+        let (xs, us) = (xs.as_slice()?, us.as_slice()?);
+        let p = slice2(&params)?;
+        let m = model.inner.clone();
+        let np = if wrt_params { m.params().len() } else { 0 };
+        let out = py
+            .detach(|| {
+                let models = models_for(&m, p, b)?;
+                flat::batched(&models, b, |mm, i| {
+                    flat::step_jacobians(
+                        mm,
+                        &xs[i * n..(i + 1) * n],
+                        &us[i * nu..(i + 1) * nu],
+                        kappa_grad,
+                        wrt_params,
+                    )
+                })
+            })
+            .py()?;
+        let (mut ga, mut gb, mut gc) = (vec![], vec![], vec![]);
+        for (a, bm, c) in out {
+            ga.extend(a);
+            gb.extend(bm);
+            gc.extend(c);
+        }
+        Ok((
+            PyArray1::from_vec(py, ga).reshape([b, n, n])?,
+            PyArray1::from_vec(py, gb).reshape([b, n, nu])?,
+            PyArray1::from_vec(py, gc).reshape([b, n, np])?,
+        ))
+    })
+}

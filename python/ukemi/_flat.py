@@ -108,3 +108,19 @@ def rollout_vjp(model, x0, us, p, g, kappa_grad):
     gu = unbroadcast(gu.reshape(lead + (t, nu)), us.shape)
     gp = None if p is None else unbroadcast(gp.reshape(lead + (np_,)), p.shape)
     return gx, gu, gp
+
+
+def step_jacobians(model, x, u, p, kappa_grad, with_params):
+    """Raw flat Jacobians ``(∂x⁺/∂x (…, nx, nx), ∂x⁺/∂u (…, nx, nu), ∂x⁺/∂θ (…, nx, np))``."""
+    nx, nu, np_ = sizes(model)
+    x, u = np.asarray(x, np.float64), np.asarray(u, np.float64)
+    shapes = [_lead("x", x, nx), _lead("u", u, nu)]
+    if p is not None:
+        p = np.asarray(p, np.float64)
+        shapes.append(_lead("params", p, np_))
+    lead = np.broadcast_shapes(*shapes)
+    P = None if p is None else _flatten(p, lead, np_)
+    a, b, c = _ukemi._flat_step_jacobians(model, _flatten(x, lead, nx), _flatten(u, lead, nu),
+                                          kappa_grad, P, with_params)
+    npc = np_ if with_params else 0
+    return (a.reshape(lead + (nx, nx)), b.reshape(lead + (nx, nu)), c.reshape(lead + (nx, npc)))

@@ -45,7 +45,7 @@ from .errors import ShapeError
 
 jax.config.update("jax_enable_x64", True)
 
-__all__ = ["backend", "ffi_available", "rollout", "set_backend", "step"]
+__all__ = ["backend", "ffi_available", "rollout", "set_backend", "step", "step_jacobians"]
 
 _TARGETS = ("ukemi_flat_step", "ukemi_flat_step_vjp", "ukemi_flat_rollout",
             "ukemi_flat_rollout_vjp")
@@ -302,3 +302,26 @@ def rollout(model, x0, us, params=None, kappa_grad=3e-4, *, convert=False):
     with_params = p is not None
     p = _bcast(p, lead + (npar,)) if with_params else _empty(lead)
     return _rollout_fn(model, k, with_params, backend())(x0, us, p)
+
+
+def step_jacobians(model, x, u=None, params=None, kappa_grad=3e-4, *, convert=False):
+    """Forward-mode companion of :func:`step` for trajectory optimisation: the Jacobians of one
+    step in raw flat coordinates, ``(A, B)`` with ``A = ∂x⁺/∂x`` (..., nx, nx) and
+    ``B = ∂x⁺/∂u`` (..., nx, nu), plus ``C = ∂x⁺/∂params`` when ``params`` is given — all from
+    one linearisation in the engine (no per-column passes). Works eagerly, under ``jit`` and
+    ``vmap`` (host callback); not itself differentiable."""
+    k, x, u, p = _prep(model, x, u, params, kappa_grad, convert, ("x", "u"))
+    nx, nu, npar = _sizes(model)
+    _check("x", x, (nx,))
+    _check("u", u, (nu,))
+    leads = [x.shape[:-1], u.shape[:-1]] + ([p.shape[:-1]] if p is not None else [])
+    lead = _lead(leads)
+    with_params = p is not None
+    pp = p if with_params else np.zeros((0,))
+    out = _f64s(lead + (nx, nx), lead + (nx, nu), lead + (nx, npar if with_params else 0))
+
+    def cb(x, u, pp):
+        return _flat.step_jacobians(model, x, u, pp if with_params else None, k, with_params)
+
+    a, b, c = jax.pure_callback(cb, out, x, u, pp, vmap_method="broadcast_all")
+    return (a, b, c) if with_params else (a, b)

@@ -19,7 +19,7 @@ from torch.autograd.function import once_differentiable
 from . import _flat
 from ._gradients import resolve_kappa
 
-__all__ = ["rollout", "step"]
+__all__ = ["rollout", "step", "step_jacobians"]
 
 # Custom ops take primitive arguments only: models are passed by a registry key.
 _MODELS: dict[int, object] = {}
@@ -207,3 +207,15 @@ def rollout(model, x0: torch.Tensor, us: torch.Tensor, params: torch.Tensor | No
     in one Rust call; the backward pass is the engine's reverse sweep."""
     u, p, key, k, wp = _args(model, x0, us, params, kappa_grad, (0, model.nu))
     return _Rollout.apply(x0, u, p, key, k, wp)
+
+
+def step_jacobians(model, x: torch.Tensor, u: torch.Tensor | None = None,
+                   params: torch.Tensor | None = None, kappa_grad=3e-4):
+    """Jacobians of one step in raw flat coordinates: ``(A (…, nx, nx), B (…, nx, nu))``, plus
+    ``C`` (…, nx, nparams) when ``params`` is given; one engine linearisation per state (for
+    iLQR-style trajectory optimisation). Not differentiable itself."""
+    u, p, _, k, wp = _args(model, x, u, params, kappa_grad, (model.nu,))
+    a, b, c = _flat.step_jacobians(model, _np(x), _np(u), _np(p) if wp else None,
+                                   None if k < 0 else k, wp)
+    out = (_back(a, x), _back(b, x))
+    return out + (_back(c, x),) if wp else out

@@ -7,7 +7,10 @@
 use rayon::prelude::*;
 
 use super::rollout::{advance, rollout_vjp_with};
-use super::tangent::{Coordinates, qpos_adjoint_from_tangent, tangent_adjoint_from_qpos};
+use super::tangent::{
+    Coordinates, qpos_adjoint_from_tangent, qpos_raw_from_tangent, qpos_tangent_from_raw,
+    tangent_adjoint_from_qpos,
+};
 use super::{Linearization, Wrt};
 use crate::joints::coordinates::{qpos_into, qvel_into, set_minimal};
 use crate::model::Model;
@@ -78,6 +81,59 @@ pub fn step_vjp(
     qpos_adjoint_from_tangent(model, &x[..nq], &a.state[..nv], &mut adj_x[..nq]);
     adj_x[nq..].copy_from_slice(&a.state[nv..]);
     Ok((adj_x, a.ctrl, a.params))
+}
+
+/// Jacobians of one flat step in raw flat coordinates: `(∂x⁺/∂x (nx × nx), ∂x⁺/∂u (nx × nu),
+/// ∂x⁺/∂θ (nx × nparams, empty unless `with_params`))`, row-major. Built from the engine's
+/// minimal-coordinate Jacobians and the exact maps between raw quaternions and tangents, so
+/// the quaternion columns include the normalisation the step applies to its input.
+pub fn step_jacobians(
+    model: &Model,
+    x: &[f64],
+    u: &[f64],
+    kappa_grad: Option<f64>,
+    with_params: bool,
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    use nalgebra::DMatrix;
+    let (nq, nv) = (model.nq, model.nv);
+    let n = nq + nv;
+    let s = state_of(model, x)?;
+    let wrt = Wrt {
+        state: true,
+        ctrl: true,
+        params: with_params,
+    };
+    let mut lin = Linearization::new(model, &s, u, Coordinates::Minimal, wrt, kappa_grad)?;
+    let jac = lin.jacobians(model)?;
+    let mut qpos_next = vec![0.0; nq];
+    qpos_into(model, lin.next_state(), &mut qpos_next);
+    // raw input -> tangent (2nv × n) and tangent -> raw output (n × 2nv)
+    let mut t_in = DMatrix::zeros(2 * nv, n);
+    let mut t_out = DMatrix::zeros(n, 2 * nv);
+    let (mut e, mut col) = (vec![0.0; n.max(2 * nv)], vec![0.0; n.max(2 * nv)]);
+    for k in 0..nq {
+        e.fill(0.0);
+        e[k] = 1.0;
+        qpos_tangent_from_raw(model, &x[..nq], &e[..nq], &mut col[..nv]);
+        for (r, c) in col[..nv].iter().enumerate() {
+            t_in[(r, k)] = *c;
+        }
+    }
+    for k in 0..nv {
+        t_in[(nv + k, nq + k)] = 1.0;
+        e.fill(0.0);
+        e[k] = 1.0;
+        qpos_raw_from_tangent(model, &qpos_next, &e[..nv], &mut col[..nq]);
+        for (r, c) in col[..nq].iter().enumerate() {
+            t_out[(r, k)] = *c;
+        }
+        t_out[(nq + k, nv + k)] = 1.0;
+    }
+    let row_major = |m: DMatrix<f64>| m.transpose().as_slice().to_vec();
+    let a = &t_out * &jac.a * &t_in;
+    let b = &t_out * &jac.b;
+    let c = &t_out * &jac.c;
+    Ok((row_major(a), row_major(b), row_major(c)))
 }
 
 /// A rollout of `nstep` steps from flat `x0`: `(T+1, nq+nv)` row-major.

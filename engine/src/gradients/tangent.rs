@@ -284,6 +284,43 @@ pub fn tangent_adjoint_from_qpos(model: &Model, qpos: &[f64], adj_qpos: &[f64], 
     }
 }
 
+/// Map a tangent `dq` (length nv) at `qpos` to a raw `qpos` change (length nq): quaternions
+/// move by `½ L(q) Vᵀ δ` (`q ⊗ exp(δ/2)` to first order), scalar coordinates copy.
+pub fn qpos_raw_from_tangent(model: &Model, qpos: &[f64], dq: &[f64], out: &mut [f64]) {
+    for j in model.joints.iter().filter(|j| !j.is_loop) {
+        let (qa, va) = (j.qpos_adr, j.qvel_adr);
+        if j.rot.nq() == 4 {
+            out[qa..qa + j.ntrans].copy_from_slice(&dq[va..va + j.ntrans]);
+            let (a, v) = (qa + j.ntrans, va + j.ntrans);
+            let q = quat::from_wxyz(&qpos[a..a + 4]);
+            let r = quat::lmat(&q) * quat::vt() * Vector3::new(dq[v], dq[v + 1], dq[v + 2]) * 0.5;
+            out[a..a + 4].copy_from_slice(r.as_slice());
+        } else {
+            out[qa..qa + j.nfree()].copy_from_slice(&dq[va..va + j.nfree()]);
+        }
+    }
+}
+
+/// Map a raw `qpos` change (length nq) at `qpos` to the tangent `dq` (length nv) of the
+/// normalised configuration: quaternions give `(2/|q|) V L(q̂)ᵀ dq_raw`.
+pub fn qpos_tangent_from_raw(model: &Model, qpos: &[f64], dq_raw: &[f64], out: &mut [f64]) {
+    for j in model.joints.iter().filter(|j| !j.is_loop) {
+        let (qa, va) = (j.qpos_adr, j.qvel_adr);
+        if j.rot.nq() == 4 {
+            out[va..va + j.ntrans].copy_from_slice(&dq_raw[qa..qa + j.ntrans]);
+            let (a, v) = (qa + j.ntrans, va + j.ntrans);
+            let q = quat::from_wxyz(&qpos[a..a + 4]);
+            let n = q.norm().max(1e-300);
+            let g = quat::v() * quat::lmat(&(q / n)).transpose() * (2.0 / n);
+            let r =
+                g * nalgebra::Vector4::new(dq_raw[a], dq_raw[a + 1], dq_raw[a + 2], dq_raw[a + 3]);
+            out[v..v + 3].copy_from_slice(r.as_slice());
+        } else {
+            out[va..va + j.nfree()].copy_from_slice(&dq_raw[qa..qa + j.nfree()]);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
