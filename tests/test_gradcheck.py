@@ -168,3 +168,20 @@ def test_raw_step_jacobians_equal_reverse_mode_jacobians(name):
     xs = jax.numpy.stack([x, x])
     av, _ = jax.vmap(lambda x: uj.step_jacobians(m, x, u, kappa_grad=1e-6))(xs)
     np.testing.assert_allclose(av[1], a, rtol=0, atol=1e-14)
+
+
+def test_torch_library_opcheck_on_the_custom_ops():
+    """torch.library.opcheck: schema, fake-tensor (meta) kernels, autograd registration and
+    vmap rules of the ukemi custom ops are consistent."""
+    from ukemi import torch as utm
+
+    m, x0 = SCENES["cartpole"]()
+    key = utm._key(m)
+    x = torch.tensor(x0)
+    u = torch.tensor([0.1], dtype=torch.float64)
+    p = torch.zeros(0, dtype=torch.float64)
+    torch.library.opcheck(utm._step_op, (key, x, u, p, False))
+    g = torch.ones_like(x)
+    torch.library.opcheck(utm._step_vjp_op, (key, -1.0, x, u, p, g, False))
+    us = torch.full((3, 1), 0.1, dtype=torch.float64)
+    torch.library.opcheck(utm._rollout_op, (key, x, us, p, False))
