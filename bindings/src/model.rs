@@ -448,7 +448,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -462,6 +462,7 @@ impl PyModel {
         warm_start: Option<bool>,
         regularization: Option<f64>,
         kappa_grad: Option<f64>,
+        activation_margin: Option<f64>,
     ) -> PyResult<PyModel> {
         guard(|| {
             let mut o = self.inner.options.clone();
@@ -474,6 +475,8 @@ impl PyModel {
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);
             o.undercut = undercut.unwrap_or(o.undercut);
             o.warm_start = warm_start.unwrap_or(o.warm_start);
+            // activation_margin = inf keeps every contact candidate active
+            o.activation_margin = activation_margin.unwrap_or(o.activation_margin);
             // kappa_grad = 0 selects the exact (unsmoothed) derivative
             if let Some(k) = kappa_grad {
                 o.kappa_grad = if k == 0.0 { None } else { Some(k) };

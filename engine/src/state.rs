@@ -238,10 +238,25 @@ pub struct Workspace {
     /// `∂θ/∂(δx⁺)` of each limited dof at the trial next configuration.
     pub(crate) limit_dtheta: Vec<[f64; 12]>,
     pub(crate) delta_aff: Vec<f64>,
+    /// Whether each contact candidate takes part in the current step (see
+    /// [`crate::Options::activation_margin`]); inactive ones carry no impulse and no solver work.
+    pub(crate) active: Vec<bool>,
     pub(crate) topology_id: u64,
 }
 
 impl Workspace {
+    /// Contact candidates that took part in the last step solved with this workspace (all of
+    /// them before the first step); the others were farther than the step's reach and carried
+    /// no impulse (see [`crate::Options::activation_margin`]).
+    pub fn active_contacts(&self) -> usize {
+        self.active.iter().filter(|&&a| a).count()
+    }
+
+    /// Per candidate, whether it took part in the last step (see [`Self::active_contacts`]).
+    pub fn contact_active(&self) -> &[bool] {
+        &self.active
+    }
+
     /// Scratch sized for `model`.
     pub fn new(model: &Model) -> Workspace {
         let t = &model.topology;
@@ -270,6 +285,7 @@ impl Workspace {
             limit_adr,
             limit_dtheta: vec![[0.0; 12]; nlim],
             delta_aff: vec![0.0; n],
+            active: vec![true; model.ncontact()],
             matrix: BlockMatrix::new(&t.pattern),
             w: vec![0.0; n],
             w_trial: vec![0.0; n],

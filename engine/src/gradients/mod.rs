@@ -222,12 +222,15 @@ struct Probe {
 impl Probe {
     fn new(lin: &Linearization, model: &Model, ctrl: &[f64]) -> Probe {
         let n = model.topology.pattern.total_dim();
+        // the residual map is linearised with the solve's contact activation frozen
+        let mut ws = Workspace::new(model);
+        ws.active.clone_from(&lin.ws.active);
         Probe {
             model: model.clone(),
             state: lin.point.state.clone(),
             next: lin.point.state.clone(),
             ctrl: ctrl.to_vec(),
-            ws: Workspace::new(model),
+            ws,
             residual: vec![0.0; n],
             y: vec![0.0; lin.coords.dim(model)],
             scratch: vec![0.0; Point::scratch_len(model)],

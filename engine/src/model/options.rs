@@ -36,6 +36,17 @@ pub struct Options {
     /// Regularisation `ε` on constraint pivots, `-ε I`: keeps redundant constraints of closed
     /// loops (a planar four-bar in 3-D) solvable without changing the solution. Default 1e-12.
     pub regularization: f64,
+    /// Contact activation margin (m). Each step, a candidate whose current signed distance
+    /// exceeds `activation_margin + h (2 u + h |g|)`, with `u` a bound on the approach speed of
+    /// its two witness points from the current velocities (`|v| + |ω| ρ` per body, `ρ` the
+    /// geom's reach from the body's centre of mass), takes no part in the solve: zero impulse, no
+    /// interior-point variables, no factorisation work. After the solve, every inactive candidate
+    /// is checked at the new configuration and the step is solved again with it active if its
+    /// distance fell below `activation_margin / 4`, so no contact the step makes is missed.
+    /// `f64::INFINITY` (the default for now) keeps every candidate active; 0.01 is the value
+    /// benchmarked in BENCHMARKS.md. Not yet the default: with it, the box-on-corner drop at
+    /// dt = 1e-3 (`tests/contact_drop.rs`) needs a cold retry (60 iterations) on one step.
+    pub activation_margin: f64,
     /// Central-path parameter at which gradients are taken (`None`: the exact derivative at the
     /// simulated solution). The step itself is always solved to `kappa_tol`; see
     /// [`crate::gradients`]. Default `None`.
@@ -57,6 +68,7 @@ impl Default for Options {
             warm_start_margin: 1e-6,
             tau_min: 0.95,
             tau_max: 0.99,
+            activation_margin: f64::INFINITY,
             kappa_grad: None,
         }
     }
@@ -88,6 +100,14 @@ impl Options {
                 "regularization",
                 self.regularization,
                 "must be finite and >= 0"
+            )
+        );
+        ensure!(
+            self.activation_margin > 0.0,
+            Error::model(
+                "activation_margin",
+                self.activation_margin,
+                "must be > 0 (f64::INFINITY keeps every contact active)"
             )
         );
         if let Some(k) = self.kappa_grad {

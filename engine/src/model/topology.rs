@@ -55,8 +55,6 @@ pub(crate) struct Topology {
     pub contact_bodies: Vec<[usize; 2]>,
     /// Whether the step has inequality variables (contacts or limits): interior-point path.
     pub has_cones: bool,
-    /// Total (orthant pairs + second-order cones): the cone degree, eq. (51).
-    pub cone_degree: usize,
     /// Rows of bodies and joints (the inequality nodes follow them).
     pub smooth_dim: usize,
 }
@@ -202,7 +200,6 @@ impl Topology {
             contact_node,
             contact_blocks,
             contact_bodies,
-            cone_degree,
             smooth_dim,
         })
     }

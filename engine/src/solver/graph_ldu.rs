@@ -352,6 +352,8 @@ pub struct BlockMatrix {
     pivots: Vec<usize>,
     /// Scratch vector of length `max_dim` for the solves.
     scratch: Vec<f64>,
+    /// Nodes left out of the factorisation and the solves (see [`Self::set_skipped`]).
+    skip: Vec<bool>,
 }
 
 impl BlockMatrix {
@@ -361,7 +363,22 @@ impl BlockMatrix {
             values: vec![0.0; p.nvalues()],
             pivots: vec![0; p.total_dim()],
             scratch: vec![0.0; p.max_dim()],
+            skip: vec![false; p.nnodes()],
         }
+    }
+
+    /// Leave `node` out of [`factor`](Self::factor) and the solves. Only valid when the node's
+    /// block row and column are those of the identity (diagonal block `I`, every coupling block
+    /// zero): the node then decouples, its solution entries equal the right-hand side and it
+    /// contributes nothing to the Schur complements, so skipping it changes no result but saves
+    /// its factorisation and updates. Used for inactive contact candidates.
+    pub fn set_skipped(&mut self, node: usize, skipped: bool) {
+        self.skip[node] = skipped;
+    }
+
+    /// Whether `node` is left out of the factorisation (see [`Self::set_skipped`]).
+    pub fn is_skipped(&self, node: usize) -> bool {
+        self.skip[node]
     }
 
     /// Set all values (including fill blocks) to zero, keeping the allocation.
@@ -407,6 +424,9 @@ impl BlockMatrix {
     /// or not finite; the values are then partially factored and must be reassembled.
     pub fn factor(&mut self, p: &BlockPattern) -> Result<(), usize> {
         for s in &p.steps {
+            if self.skip[s.node] {
+                continue;
+            }
             let dk = s.dim;
             let piv = &mut self.pivots[s.row..s.row + dk];
             // D_k = A_kk = P L U
@@ -443,7 +463,7 @@ impl BlockMatrix {
         );
         let z = &mut self.scratch;
         // Forward, L̃ z = b: z_k = D_k⁻¹ y_k, then y_i -= A_ik z_k for later i.
-        for s in &p.steps {
+        for s in p.steps.iter().filter(|s| !self.skip[s.node]) {
             let (dk, rows) = (s.dim, s.row..s.row + s.dim);
             let piv = &self.pivots[rows.clone()];
             lu_solve(&self.values[s.diag..], dk, piv, &mut b[rows.clone()]);
@@ -454,7 +474,7 @@ impl BlockMatrix {
             }
         }
         // Backward, Ũ x = z: x_k = z_k - Σ_{later j} U_kj x_j.
-        for s in p.steps.iter().rev() {
+        for s in p.steps.iter().rev().filter(|s| !self.skip[s.node]) {
             let (dk, rows) = (s.dim, s.row..s.row + s.dim);
             z[..dk].copy_from_slice(&b[rows.clone()]);
             for nb in &p.nbrs[s.nbrs.clone()] {
@@ -475,7 +495,7 @@ impl BlockMatrix {
         );
         let w = &mut self.scratch;
         // Forward, Ũᵀ w = b: w_k = y_k, then y_j -= U_kjᵀ w_k for later j.
-        for s in &p.steps {
+        for s in p.steps.iter().filter(|s| !self.skip[s.node]) {
             let (dk, rows) = (s.dim, s.row..s.row + s.dim);
             w[..dk].copy_from_slice(&b[rows]);
             for nb in &p.nbrs[s.nbrs.clone()] {
@@ -484,7 +504,7 @@ impl BlockMatrix {
             }
         }
         // Backward, L̃ᵀ x = w: x_k = D_k⁻ᵀ (w_k - Σ_{later i} A_ikᵀ x_i).
-        for s in p.steps.iter().rev() {
+        for s in p.steps.iter().rev().filter(|s| !self.skip[s.node]) {
             let (dk, rows) = (s.dim, s.row..s.row + s.dim);
             w[..dk].copy_from_slice(&b[rows.clone()]);
             for nb in &p.nbrs[s.nbrs.clone()] {

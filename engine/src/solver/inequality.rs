@@ -41,10 +41,18 @@ const LIMIT_PAIRS: [(usize, usize, usize); 2] = [(0, 1, 1), (2, 3, 3)];
 const SOC: (usize, usize, usize) = (2, 5, 3);
 
 /// Visit every complementarity pair of the step: `f(offset, primal, dual, row, is_soc)` with
-/// node-local indices relative to the node offset.
-fn for_each_pair(model: &Model, mut f: impl FnMut(usize, usize, usize, usize, bool)) {
+/// node-local indices relative to the node offset. Inactive contact candidates (`active[c]`
+/// false) are left out.
+fn for_each_pair(
+    model: &Model,
+    active: &[bool],
+    mut f: impl FnMut(usize, usize, usize, usize, bool),
+) {
     let t = &model.topology;
     for (c, contact) in model.contacts.iter().enumerate() {
+        if !active[c] {
+            continue;
+        }
         let o = t.pattern.offset(t.contact_node[c]);
         for &(p, d, r) in orthant_pairs(contact.model) {
             f(o, p, d, r, false);
@@ -88,7 +96,7 @@ pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm:
     }
     let margin = model.options.warm_start_margin;
     let w = &mut ws.w;
-    for_each_pair(model, |o, p, d, _, soc| {
+    for_each_pair(model, &ws.active, |o, p, d, _, soc| {
         if soc {
             for start in [o + p, o + d] {
                 let mut y = v3(w, start);
@@ -120,11 +128,92 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     }
 }
 
+/// Largest distance (m) from a body's centre of mass to any point of `geom` (infinite for a
+/// plane on a moving body).
+fn geom_reach(geom: &crate::contact::Geom) -> f64 {
+    use crate::contact::geometry::Shape;
+    let r = match geom.shape {
+        Shape::Plane => f64::INFINITY,
+        Shape::Sphere { radius } => radius,
+        Shape::Capsule {
+            radius,
+            half_length,
+        } => radius + half_length,
+        Shape::Box { half_extents } => half_extents.norm(),
+        Shape::Cylinder {
+            radius,
+            half_length,
+        } => radius.hypot(half_length),
+        Shape::Ellipsoid { radii } => radii.max(),
+        Shape::Point => 0.0,
+    };
+    geom.pos.norm() + r
+}
+
+/// Choose the candidates that take part in this step (after [`prepare`]): those whose current
+/// distance is within `activation_margin + h (2 u + h |g|)`, `u = Σ_bodies |v| + |ω| ρ` the
+/// largest speed of any point of the two geoms from the current velocities. Candidates
+/// between two bodies at rest stay inactive until the distance shrinks; a step that closes a
+/// gap faster than this estimate (an impulsive actuator or collision) is caught by
+/// [`missed_contacts`] and re-solved.
+pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace) {
+    let margin = model.options.activation_margin;
+    if margin == f64::INFINITY {
+        ws.active.fill(true);
+        return;
+    }
+    let h = model.options.timestep;
+    let drift = h * h * model.options.gravity.norm();
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let mut speed = 0.0;
+        for g in [contact.geom_a, contact.geom_b] {
+            let geom = &model.geoms[g];
+            if geom.body == 0 {
+                continue;
+            }
+            let (v, om) = state.velocity(geom.body);
+            speed += v.norm();
+            let spin = om.norm();
+            if spin > 0.0 {
+                speed += spin * geom_reach(geom);
+            }
+        }
+        let reach = margin + 2.0 * h * speed + drift;
+        // NaN distances or speeds stay active (the solve then reports them)
+        let phi = ws.contact_now[c].phi;
+        ws.active[c] = phi.is_nan() || reach.is_nan() || phi <= reach;
+    }
+}
+
+/// After a solve with some candidates inactive: activate every inactive candidate whose
+/// distance at the new configuration (`ws.next_pose`) is below `activation_margin / 4`;
+/// returns how many were activated (the step must then be solved again).
+pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
+    let floor = 0.25 * model.options.activation_margin;
+    let mut n = 0;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        if ws.active[c] {
+            continue;
+        }
+        let next = &ws.next_pose;
+        let (wit, _, _) = witness(contact, &model.geoms, |x| {
+            if x == 0 { Pose::world() } else { next[x] }
+        });
+        if wit.phi.is_nan() || wit.phi <= floor {
+            ws.active[c] = true;
+            n += 1;
+        }
+    }
+    n
+}
+
 /// Add the inequality rows at the iterate `w` (with `ws.next_pose` set) and their impulses on
 /// the body rows. Complementarity rows hold `b ∘ c - κ e`. Returns (equality ∞-norm of these
-/// nodes, max |b ∘ c|).
+/// nodes, max |b ∘ c|). An inactive candidate's variables are frozen at the step's starting
+/// values `state.ineq_vars` (rows `x - x₀`, no impulse).
 pub(crate) fn evaluate(
     model: &Model,
+    state: &State,
     ws: &mut Workspace,
     w: &[f64],
     residual: &mut [f64],
@@ -138,7 +227,18 @@ pub(crate) fn evaluate(
             ws.next_pose[b]
         }
     };
+    let mut k = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
+        let dim = contact.model.dim();
+        k += dim;
+        if !ws.active[c] {
+            // no impulse; the variables stay at their starting values (zero rows there)
+            let o = t.pattern.offset(t.contact_node[c]);
+            for i in 0..dim {
+                residual[o + i] = w[o + i] - state.ineq_vars[k - dim + i];
+            }
+            continue;
+        }
         let [a, b] = t.contact_bodies[c];
         let (wit, pa, pb) = witness(contact, &model.geoms, |x| {
             if x == a {
@@ -184,7 +284,7 @@ pub(crate) fn evaluate(
             }
         }
     }
-    violations(model, w, residual, kappa)
+    violations(model, &ws.active, w, residual, kappa)
 }
 
 /// Residual rows of contact `c` and its impulse on the bodies.
@@ -256,7 +356,13 @@ fn contact_rows(model: &Model, ws: &Workspace, c: usize, w: &[f64], residual: &m
 
 /// Subtract κ from the complementarity rows' identity components; return (equality ∞-norm of the
 /// inequality nodes, max |b ∘ c| / max(1, |b|) before the shift).
-fn violations(model: &Model, w: &[f64], residual: &mut [f64], kappa: f64) -> (f64, f64) {
+fn violations(
+    model: &Model,
+    active: &[bool],
+    w: &[f64],
+    residual: &mut [f64],
+    kappa: f64,
+) -> (f64, f64) {
     let t = &model.topology;
     // complementarity violation per pair, relative to the primal (impulse) variable once it
     // exceeds 1 N·s: a 1000 kg box's contact carries a product γ s 25× larger than a 1 kg box's
@@ -275,7 +381,9 @@ fn violations(model: &Model, w: &[f64], residual: &mut [f64], kappa: f64) -> (f6
         }
         residual[o + row] -= kappa;
     };
-    for_each_pair(model, |o, p, _, row, soc| is_comp(o, p, row, soc, residual));
+    for_each_pair(model, active, |o, p, _, row, soc| {
+        is_comp(o, p, row, soc, residual)
+    });
     // equality rows = all node rows that are not complementarity rows
     let mut rvio: f64 = 0.0;
     let eq = |o: usize, rows: &[usize], residual: &[f64], rvio: &mut f64| {
@@ -289,6 +397,9 @@ fn violations(model: &Model, w: &[f64], residual: &mut [f64], kappa: f64) -> (f6
         }
     };
     for (c, contact) in model.contacts.iter().enumerate() {
+        if !active[c] {
+            continue;
+        }
         let o = t.pattern.offset(t.contact_node[c]);
         let rows: &[usize] = match contact.model {
             ContactModel::Impact => &[0],
@@ -315,6 +426,17 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
         let n = t.contact_node[c];
         let (o, dim) = (t.pattern.offset(n), contact.model.dim());
         let diag = t.pattern.block(n, n).unwrap_or(0);
+        let active = ws.active[c];
+        ws.matrix.set_skipped(n, !active);
+        if !active {
+            // frozen variables: identity diagonal block, zero couplings (left zero by
+            // `BlockMatrix::zero`), so the factorisation can skip the node
+            let d = &mut ws.matrix.values[diag..diag + dim * dim];
+            for i in 0..dim {
+                d[i * dim + i] = 1.0;
+            }
+            continue;
+        }
         contact_diag(
             contact.model,
             contact.friction,
@@ -461,13 +583,14 @@ fn assemble_limits(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
 /// (Algorithm 1).
 pub(crate) fn cone_search(
     model: &Model,
+    active: &[bool],
     w: &[f64],
     delta: &[f64],
     tau_ort: f64,
     tau_soc: f64,
 ) -> f64 {
     let mut alpha: f64 = 1.0;
-    for_each_pair(model, |o, p, d, _, soc| {
+    for_each_pair(model, active, |o, p, d, _, soc| {
         if soc {
             for s in [o + p, o + d] {
                 alpha = alpha.min(soc_step(&v3(w, s), &v3(delta, s), tau_soc));
@@ -483,20 +606,34 @@ pub(crate) fn cone_search(
     alpha
 }
 
-/// Mean complementarity `μ = Σ bᵀc / deg(K)` at `w + α Δ` (eqs. 52-53).
-pub(crate) fn mean_complementarity(model: &Model, w: &[f64], delta: &[f64], alpha: f64) -> f64 {
+/// Mean complementarity `μ = Σ bᵀc / deg(K)` at `w + α Δ` (eqs. 52-53), over the active
+/// cones only (`deg(K)` counts the pairs visited).
+pub(crate) fn mean_complementarity(
+    model: &Model,
+    active: &[bool],
+    w: &[f64],
+    delta: &[f64],
+    alpha: f64,
+) -> f64 {
     let mut sum = 0.0;
+    let mut degree = 0usize;
     let at = |i: usize| w[i] + alpha * delta[i];
-    for_each_pair(model, |o, p, d, _, soc| {
+    for_each_pair(model, active, |o, p, d, _, soc| {
         let n = if soc { 3 } else { 1 };
         sum += (0..n).map(|i| at(o + p + i) * at(o + d + i)).sum::<f64>();
+        degree += 1;
     });
-    sum / model.topology.cone_degree.max(1) as f64
+    sum / degree.max(1) as f64
 }
 
 /// Mehrotra's second-order term: add `Δb_aff ∘ Δc_aff` to the complementarity rows.
-pub(crate) fn add_mehrotra_correction(model: &Model, delta_aff: &[f64], residual: &mut [f64]) {
-    for_each_pair(model, |o, p, d, row, soc| {
+pub(crate) fn add_mehrotra_correction(
+    model: &Model,
+    active: &[bool],
+    delta_aff: &[f64],
+    residual: &mut [f64],
+) {
+    for_each_pair(model, active, |o, p, d, row, soc| {
         if soc {
             let c = soc_product(&v3(delta_aff, o + p), &v3(delta_aff, o + d));
             for i in 0..3 {
@@ -509,17 +646,25 @@ pub(crate) fn add_mehrotra_correction(model: &Model, delta_aff: &[f64], residual
 }
 
 /// Copy the inequality variables of the solved iterate into the state (warm start and output).
-pub(crate) fn store(model: &Model, state: &mut State, w: &[f64]) {
+/// An inactive candidate stores zero impulse (γ = 0 marks it as inactive for the next warm
+/// start) and its slack at the current distance.
+pub(crate) fn store(model: &Model, state: &mut State, ws: &Workspace) {
     let t = &model.topology;
     let mut k = 0;
-    let nodes = t
-        .contact_node
-        .iter()
-        .copied()
-        .chain(t.limit_node.iter().flatten().copied());
-    for n in nodes {
+    for (c, &n) in t.contact_node.iter().enumerate() {
         let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
-        state.ineq_vars[k..k + dim].copy_from_slice(&w[o..o + dim]);
+        let x = &mut state.ineq_vars[k..k + dim];
+        if ws.active[c] {
+            x.copy_from_slice(&ws.w[o..o + dim]);
+        } else {
+            x.fill(0.0);
+            x[1] = ws.contact_now[c].phi.max(0.0);
+        }
+        k += dim;
+    }
+    for &n in t.limit_node.iter().flatten() {
+        let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
+        state.ineq_vars[k..k + dim].copy_from_slice(&ws.w[o..o + dim]);
         k += dim;
     }
 }

@@ -74,16 +74,17 @@ fn solve_to(model: &Model, state: &State, ws: &mut Workspace, central: Option<f6
             *d = -r;
         }
         ws.matrix.solve(p, &mut ws.delta_aff);
-        let alpha_aff = cone_search(model, &ws.w, &ws.delta_aff, 1.0, 1.0);
-        let mu = mean_complementarity(model, &ws.w, &ws.delta_aff, 0.0);
-        let mu_aff = mean_complementarity(model, &ws.w, &ws.delta_aff, alpha_aff);
+        let act = &ws.active;
+        let alpha_aff = cone_search(model, act, &ws.w, &ws.delta_aff, 1.0, 1.0);
+        let mu = mean_complementarity(model, act, &ws.w, &ws.delta_aff, 0.0);
+        let mu_aff = mean_complementarity(model, act, &ws.w, &ws.delta_aff, alpha_aff);
         let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
         let kappa = (sigma * mu).max(floor);
         // corrector: Δ = -R⁻¹ (r(w, κ) + Δb_aff ∘ Δc_aff), reusing the factorisation
         evaluate(model, state, ws, false, kappa);
         let merit = norm2(&ws.residual);
         ws.delta.copy_from_slice(&ws.residual);
-        add_mehrotra_correction(model, &ws.delta_aff, &mut ws.delta);
+        add_mehrotra_correction(model, &ws.active, &ws.delta_aff, &mut ws.delta);
         solve_negated(ws, p);
         let taus = fractions_to_boundary(model, vio);
         let accepted = match line_search(model, state, ws, kappa, merit, taus) {
@@ -155,8 +156,8 @@ fn line_search(
     merit: f64,
     (tau_ort, tau_soc): (f64, f64),
 ) -> Option<Violation> {
-    let mut alpha =
-        cone_search(model, &ws.w, &ws.delta, tau_ort, tau_soc).min(spin_limited_step(model, ws));
+    let mut alpha = cone_search(model, &ws.active, &ws.w, &ws.delta, tau_ort, tau_soc)
+        .min(spin_limited_step(model, ws));
     for _ in 0..=model.options.max_ls {
         for i in 0..ws.w.len() {
             ws.w_trial[i] = ws.w[i] + alpha * ws.delta[i];
@@ -182,6 +183,9 @@ pub(crate) fn solve_central(
     ws: &mut Workspace,
     kappa: f64,
 ) -> StepReport {
+    // every candidate takes part: the relaxed problem gives far contacts a (small) impulse
+    // too, and the smoothed step map must not depend on the activation heuristic
+    ws.active.fill(true);
     super::inequality::initialize(model, state, ws, false);
     solve_to(model, state, ws, Some(kappa))
 }

@@ -123,6 +123,7 @@ pub(crate) fn prepare(
         }
     }
     if model.topology.has_cones {
+        super::inequality::activate(model, state, ws);
         super::inequality::initialize(model, state, ws, model.options.warm_start);
     }
 }
@@ -234,7 +235,7 @@ pub(crate) fn evaluate_in(
     smooth_rows(model, state, ws, w, residual);
     if model.topology.has_cones {
         // adds contact and limit impulses to the body rows, so measure the body rows after it
-        let (r, k) = super::inequality::evaluate(model, ws, w, residual, kappa);
+        let (r, k) = super::inequality::evaluate(model, state, ws, w, residual, kappa);
         let smooth = inf_norm(&residual[..model.topology.smooth_dim]);
         let r = if r.is_nan() || smooth.is_nan() {
             f64::NAN
@@ -493,6 +494,44 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     if !model.topology.has_cones {
         return solve_newton(model, state, ws);
     }
+    let mut report = solve_active(model, state, ws);
+    // Candidates left out of the step must not have been reached by it: check each at the new
+    // configuration; if the step brought one within a quarter of the activation margin, solve
+    // the step again with it active (rare: the activation reach already covers twice the
+    // current speeds). A few rounds at most; the last one has every candidate active.
+    for round in 0..3 {
+        if report.status != SolveStatus::Converged {
+            break;
+        }
+        let missed = super::inequality::missed_contacts(model, ws);
+        if missed == 0 {
+            break;
+        }
+        if round == 2 {
+            ws.active.fill(true);
+        }
+        let iterations = report.iterations;
+        restart_warm(model, state, ws);
+        report = solve_active(model, state, ws);
+        report.iterations += iterations;
+    }
+    report
+}
+
+/// Reset the iterate to the state's velocities and warm-started inequality variables, keeping
+/// the current activation.
+fn restart_warm(model: &Model, state: &State, ws: &mut Workspace) {
+    for b in 1..model.nbody() {
+        let o = body_slot(model, b);
+        let (v, w) = state.velocity(b);
+        ws.w[o..o + 3].copy_from_slice(v.as_slice());
+        ws.w[o + 3..o + 6].copy_from_slice(w.as_slice());
+    }
+    super::inequality::initialize(model, state, ws, model.options.warm_start);
+}
+
+/// The interior-point solve with the current activation, retried cold once on failure.
+fn solve_active(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
     let first = super::ipm::solve(model, state, ws);
     if first.status == SolveStatus::Converged || !model.options.warm_start {
         return first;
@@ -583,7 +622,7 @@ pub(crate) fn write_state(model: &Model, state: &mut State, ws: &Workspace) {
         }
     }
     if model.topology.has_cones {
-        super::inequality::store(model, state, &ws.w);
+        super::inequality::store(model, state, ws);
     }
     state.time += model.options.timestep;
 }

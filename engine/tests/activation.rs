@@ -1,0 +1,169 @@
+//! Contact activation (`Options::activation_margin`): candidates out of the step's reach take no
+//! part in the solve. The trajectory must not change, and no contact may be missed.
+#[path = "common/contact.rs"]
+mod common;
+use common::*;
+use nalgebra::Vector3;
+use ukemi_engine::{
+    AppliedForces, ContactModel, Model, ModelBuilder, Options, Shape, SolveStatus, State,
+    Workspace, contact, step, step_with,
+};
+
+/// Tolerances 100× tighter than the defaults, so that what the solves leave unresolved does not
+/// hide the effect of activation: all-active solves give far candidates impulses of order
+/// `kappa / φ`, and each step's solution is only known to `rtol` (at the default tolerances the
+/// two trajectories below differ by 1.5e-9 after 200 steps).
+fn with_margin(model: &Model, margin: f64) -> Model {
+    model
+        .with_options(Options {
+            activation_margin: margin,
+            rtol: 1e-12,
+            kappa_tol: 1e-13,
+            ..model.options.clone()
+        })
+        .unwrap()
+}
+
+/// Six spheres dropped with sideways velocities at different heights: 6 floor candidates and
+/// 15 sphere-sphere candidates, most of them far most of the time.
+fn spheres() -> Model {
+    let mut b = floor(ModelBuilder::new().timestep(0.01), 0.7);
+    for i in 0..6 {
+        let x = 1.5 * i as f64;
+        b = free_body(
+            b,
+            &format!("s{i}"),
+            1.0 + 0.3 * i as f64,
+            Shape::Sphere { radius: 0.1 },
+            [x, 0.2 * i as f64, 0.3 + 0.25 * i as f64],
+            [1.0, 0.0, 0.0, 0.0],
+            0.7,
+            ContactModel::Nonlinear,
+        );
+    }
+    b.compile().unwrap()
+}
+
+fn start(model: &Model) -> State {
+    let mut state = State::reference(model);
+    for b in 1..model.nbody() {
+        let k = b as f64;
+        state.set_velocity(
+            b,
+            &Vector3::new(0.5 * k.sin(), 0.3 * k.cos(), 0.2 * k),
+            &Vector3::new(0.0, 3.0 * k.cos(), 1.0),
+        );
+    }
+    state
+}
+
+#[test]
+fn far_candidates_do_not_change_the_trajectory() {
+    let base = spheres();
+    let (on, off) = (with_margin(&base, 0.01), with_margin(&base, f64::INFINITY));
+    let (mut s_on, mut s_off) = (start(&on), start(&off));
+    let (mut ws_on, mut ws_off) = (Workspace::new(&on), Workspace::new(&off));
+    let (mut least, mut most) = (usize::MAX, 0);
+    let (mut it_on, mut it_off) = (0, 0);
+    let mut worst: f64 = 0.0;
+    for _ in 0..200 {
+        let r_on = step(&on, &mut s_on, &mut ws_on, &[]).unwrap();
+        let r_off = step(&off, &mut s_off, &mut ws_off, &[]).unwrap();
+        assert_eq!(r_on.status, SolveStatus::Converged, "{r_on:?}");
+        assert_eq!(r_off.status, SolveStatus::Converged, "{r_off:?}");
+        it_on += r_on.iterations;
+        it_off += r_off.iterations;
+        assert_eq!(ws_off.active_contacts(), off.ncontact());
+        least = least.min(ws_on.active_contacts());
+        most = most.max(ws_on.active_contacts());
+        for b in 1..on.nbody() {
+            let d = (s_on.pose(b).pos - s_off.pose(b).pos).norm();
+            let v = (s_on.velocity(b).0 - s_off.velocity(b).0).norm();
+            worst = worst.max(d).max(v);
+        }
+        // inactive candidates report zero impulse
+        let imp = s_on.contact_impulse(&on);
+        for (c, &a) in ws_on.contact_active().iter().enumerate() {
+            if !a {
+                assert_eq!(&imp[3 * c..3 * c + 3], &[0.0; 3]);
+            }
+        }
+    }
+    eprintln!(
+        "active candidates {least}..={most} of {}; iterations {it_on} vs {it_off} all active; \
+         largest difference {worst:.2e}",
+        on.ncontact()
+    );
+    assert!(worst < 1e-9, "trajectories differ by {worst:e}");
+    assert!(least < on.ncontact() / 2, "activation left {least} active");
+    assert!(
+        most >= 6,
+        "the landed spheres' floor contacts must be active"
+    );
+}
+
+#[test]
+fn a_fast_sphere_is_caught_by_the_floor() {
+    let model = free_body(
+        floor(ModelBuilder::new().timestep(0.01), 0.5),
+        "ball",
+        1.0,
+        Shape::Sphere { radius: 0.05 },
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0, 0.0],
+        0.5,
+        ContactModel::Nonlinear,
+    )
+    .compile()
+    .unwrap();
+    let model = with_margin(&model, 0.01);
+    let mut state = State::reference(&model);
+    state.set_velocity(1, &Vector3::new(3.0, 0.0, -40.0), &Vector3::zeros());
+    let mut ws = Workspace::new(&model);
+    let mut inactive_steps = 0;
+    for _ in 0..60 {
+        let r = step(&model, &mut state, &mut ws, &[]).unwrap();
+        assert_eq!(r.status, SolveStatus::Converged, "{r:?}");
+        inactive_steps += usize::from(ws.active_contacts() == 0);
+        let phi = contact::signed_distances(&model, &state)[0];
+        assert!(phi >= -1e-8, "t = {}: penetration {phi:e}", state.time);
+    }
+    assert!(inactive_steps > 0, "the far floor should start inactive");
+}
+
+#[test]
+fn a_contact_the_estimate_misses_is_still_enforced() {
+    // at rest 4 cm above the floor, no gravity: the activation estimate (zero speed) leaves the
+    // floor inactive, then a 2000 N push closes the gap within one 10 ms step
+    let model = free_body(
+        floor(ModelBuilder::new().timestep(0.01).gravity([0.0; 3]), 0.5),
+        "ball",
+        1.0,
+        Shape::Sphere { radius: 0.05 },
+        [0.0, 0.0, 0.09],
+        [1.0, 0.0, 0.0, 0.0],
+        0.5,
+        ContactModel::Nonlinear,
+    )
+    .compile()
+    .unwrap();
+    let model = with_margin(&model, 0.01);
+    let mut state = State::reference(&model);
+    let mut ws = Workspace::new(&model);
+    let mut xfrc = vec![0.0; 6 * model.nbody()];
+    xfrc[6 + 2] = -2000.0;
+    let forces = AppliedForces {
+        qfrc: None,
+        xfrc: Some(&xfrc),
+    };
+    let r = step_with(&model, &mut state, &mut ws, &[], &forces).unwrap();
+    assert_eq!(r.status, SolveStatus::Converged, "{r:?}");
+    assert_eq!(
+        ws.active_contacts(),
+        1,
+        "the missed floor contact is re-solved active"
+    );
+    let phi = contact::signed_distances(&model, &state)[0];
+    assert!(phi.abs() < 1e-8, "penetration or gap {phi:e}");
+    assert!(state.contact_impulse(&model)[0] > 1.0);
+}
