@@ -15,6 +15,8 @@ import numpy as np
 
 import ukemi
 
+# e.g. `ACTIVATION=0.01` runs with contact activation (Options::activation_margin)
+OPTS = {}
 
 def main(rates):
     with warnings.catch_warnings():
@@ -23,7 +25,7 @@ def main(rates):
     s0 = m0.make_state()
     d0 = ukemi.signed_distances(m0, s0).min()
     for hz in rates:
-        m = m0.with_options(timestep=1.0 / hz)
+        m = m0.with_options(timestep=1.0 / hz, **OPTS)
         q = np.array(s0.qpos)
         q[2] += 0.1 - d0
         s = m.make_state(qpos=q)
@@ -37,4 +39,8 @@ def main(rates):
 
 
 if __name__ == "__main__":
+    import os
+
+    if os.environ.get("ACTIVATION"):
+        OPTS["activation_margin"] = float(os.environ["ACTIVATION"])
     main([int(a) for a in sys.argv[1:]] or [20, 50, 100])
