@@ -262,3 +262,26 @@ def test_handler_checks_its_inputs_under_jit():
         raw("ukemi_flat_step", out, h, x, u, p)
     with pytest.raises(Exception, match="ShapeError: shape of `params`"):
         raw("ukemi_flat_step", out, h, x, u, p, with_params=np.int32(1))
+
+
+def test_step_with_status_reports_failures_as_an_output_under_jit():
+    """Non-convergence as data: the status output flags the failed batch element, the others
+    are the normal steps, and gradients of converged elements flow."""
+    m = ball_on_floor()
+    bad = m.with_options(max_iter=1)
+    x_ok = sliding_ball_state(m)
+    x_hit = np.concatenate([m.make_state().qpos, [0.0, 0.0, -3.0, 0, 0, 0]])
+    xs = jnp.asarray(np.stack([x_ok, x_hit]))
+    u = jnp.zeros((2, m.nu))
+    for name in ("ffi", "callback"):
+        with backend(name):
+            xn, st = jax.jit(lambda x, u: ujax.step_with_status(bad, x, u))(xs, u)
+            assert st.dtype == jnp.int32 and st.shape == (2,)
+            assert int(st[1]) != 0  # the impact cannot converge in one iteration
+            assert np.all(np.isfinite(np.asarray(xn)))
+            xn_good, st_good = ujax.step_with_status(m, xs, u)
+            np.testing.assert_array_equal(np.asarray(st_good), [0, 0])
+            np.testing.assert_allclose(xn_good, ujax.step(m, xs, u), rtol=0, atol=1e-12)
+            g = jax.grad(lambda x: ujax.step_with_status(m, x, u[0])[0].sum())(xs[0])
+            np.testing.assert_allclose(g, jax.grad(lambda x: ujax.step(m, x, u[0]).sum())(xs[0]),
+                                       rtol=1e-12, atol=1e-12)

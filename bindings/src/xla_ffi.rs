@@ -399,6 +399,22 @@ impl<'a> Buf<'a> {
         Ok(unsafe { std::slice::from_raw_parts(self.data as *const f64, n) })
     }
 
+    fn i32s_mut(&self) -> HResult<&'a mut [i32]> {
+        if self.dtype != dtype::S32 {
+            return Err(Fail::arg(format!(
+                "TypeError: `{}` must be int32, got {}",
+                self.name,
+                dtype_name(self.dtype)
+            )));
+        }
+        let n = self.len();
+        if n == 0 {
+            return Ok(&mut []);
+        }
+        // SAFETY: a result buffer of `n` i32, distinct from every other buffer.
+        Ok(unsafe { std::slice::from_raw_parts_mut(self.data as *mut i32, n) })
+    }
+
     fn f64s_mut(&self) -> HResult<&'a mut [f64]> {
         self.check_f64()?;
         let n = self.len();
@@ -593,6 +609,38 @@ fn step_impl(f: &Frame) -> HResult<()> {
         flat::step(mm, &xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu])
     })?;
     scatter(out, res, n);
+    Ok(())
+}
+
+/// Like `step_impl`, plus a status output (…,) int32; non-convergence is reported there (the
+/// last iterate is returned) instead of failing the call.
+fn step_status_impl(f: &Frame) -> HResult<()> {
+    f.counts(4, 2)?;
+    let m = f.model()?;
+    let with_params = f.flag("with_params")?;
+    let (n, nu, np) = (flat::nx(&m), m.nu(), m.params().len());
+    let x = f.arg(1, "x")?;
+    let lead = x.lead(&[Some(n)])?;
+    let u = f.arg(2, "u")?;
+    u.expect(lead, &[nu])?;
+    let p = f.arg(3, "params")?;
+    if with_params {
+        p.expect(lead, &[np])?;
+    }
+    let out = f.ret(0, "x_next")?;
+    out.expect(lead, &[n])?;
+    let status = f.ret(1, "status")?;
+    status.expect(lead, &[])?;
+    let (xs, us, ps) = (x.f64s()?, u.f64s()?, p.f64s()?);
+    let (out, status) = (out.f64s_mut()?, status.i32s_mut()?);
+    let b = batch_of(lead);
+    let res = run_batch(&m, with_params.then_some(ps), b, |mm, i| {
+        flat::step_with_status(mm, &xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu])
+    })?;
+    for (i, (xn, st)) in res.into_iter().enumerate() {
+        out[i * n..(i + 1) * n].copy_from_slice(&xn);
+        status[i] = i32::from(st);
+    }
     Ok(())
 }
 
@@ -856,14 +904,16 @@ macro_rules! handler {
 
 handler!(ukemi_flat_step, step_impl);
 handler!(ukemi_flat_step_vjp, step_vjp_impl);
+handler!(ukemi_flat_step_status, step_status_impl);
 handler!(ukemi_flat_rollout, rollout_impl);
 handler!(ukemi_flat_rollout_vjp, rollout_vjp_impl);
 
 type Handler = unsafe extern "C" fn(*mut XLA_FFI_CallFrame) -> *mut XLA_FFI_Error;
 
 /// Target names and handlers.
-pub const HANDLERS: [(&str, Handler); 4] = [
+pub const HANDLERS: [(&str, Handler); 5] = [
     ("ukemi_flat_step", ukemi_flat_step),
+    ("ukemi_flat_step_status", ukemi_flat_step_status),
     ("ukemi_flat_step_vjp", ukemi_flat_step_vjp),
     ("ukemi_flat_rollout", ukemi_flat_rollout),
     ("ukemi_flat_rollout_vjp", ukemi_flat_rollout_vjp),

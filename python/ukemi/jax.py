@@ -45,10 +45,13 @@ from .errors import ShapeError
 
 jax.config.update("jax_enable_x64", True)
 
-__all__ = ["backend", "ffi_available", "rollout", "set_backend", "step", "step_jacobians"]
+__all__ = [
+    "backend", "ffi_available", "rollout", "set_backend", "step", "step_jacobians",
+    "step_with_status",
+]
 
 _TARGETS = ("ukemi_flat_step", "ukemi_flat_step_vjp", "ukemi_flat_rollout",
-            "ukemi_flat_rollout_vjp")
+            "ukemi_flat_rollout_vjp", "ukemi_flat_step_status")
 
 
 def _register_ffi():
@@ -325,3 +328,75 @@ def step_jacobians(model, x, u=None, params=None, kappa_grad=3e-4, *, convert=Fa
 
     a, b, c = jax.pure_callback(cb, out, x, u, pp, vmap_method="broadcast_all")
     return (a, b, c) if with_params else (a, b)
+
+
+def _status_np(model, x, u, p):
+    """Callback-backend fallback of the status step: a Python loop over the batch."""
+    from . import _simulate
+
+    nx, nu, _ = _sizes(model)
+    lead = x.shape[:-1]
+    xs, us = np.reshape(x, (-1, nx)), np.reshape(u, (-1, nu))
+    ps = None if p is None or p.shape[-1] == 0 else np.reshape(p, (xs.shape[0], -1))
+    out, st = np.zeros_like(xs), np.zeros(xs.shape[0], np.int32)
+    names = list(_ukemi.STATUS_NAMES)
+    for i in range(xs.shape[0]):
+        m = model if ps is None else model.with_params(ps[i])
+        s = m.make_state(qpos=xs[i, :m.nq], qvel=xs[i, m.nq:])
+        n, info = _simulate.step(m, s, us[i], on_failure="return")
+        out[i] = np.concatenate([n.qpos, n.qvel])
+        st[i] = names.index(info.status)
+    return out.reshape(lead + (nx,)), st.reshape(lead)
+
+
+@functools.lru_cache(maxsize=None)
+def _status_fn(model, kappa, with_params, how):
+    if how == "ffi":
+        h = _handle(model)
+
+        def call_fwd(x, u, p):
+            out = (jax.ShapeDtypeStruct(x.shape, jnp.float64),
+                   jax.ShapeDtypeStruct(x.shape[:-1], jnp.int32))
+            return jax.ffi.ffi_call("ukemi_flat_step_status", out, vmap_method="broadcast_all")(
+                h, x, u, p, with_params=np.int32(with_params))
+    else:
+        def call_fwd(x, u, p):
+            out = (jax.ShapeDtypeStruct(x.shape, jnp.float64),
+                   jax.ShapeDtypeStruct(x.shape[:-1], jnp.int32))
+            return jax.pure_callback(
+                lambda x, u, p: _status_np(model, x, u, p if with_params else None), out,
+                x, u, p, vmap_method="broadcast_all")
+    bwd = _step_fn(model, kappa, with_params, how)
+
+    @jax.custom_vjp
+    def f(x, u, p):
+        return call_fwd(x, u, p)
+
+    def f_fwd(x, u, p):
+        return call_fwd(x, u, p), (x, u, p)
+
+    def f_bwd(res, g):
+        # the status output is an integer: its cotangent is ignored
+        _, vjp = jax.vjp(bwd, *res)
+        return vjp(g[0])
+
+    f.defvjp(f_fwd, f_bwd)
+    return jax.jit(f)
+
+
+def step_with_status(model, x, u=None, params=None, kappa_grad=3e-4, *, convert=False):
+    """:func:`step` that reports instead of failing: returns ``(x_next, status)`` with
+    ``status`` (...,) int32 in ``ukemi.STATUS_NAMES`` order (0 = converged). A step that did not
+    converge returns its last iterate with a non-zero status, so a jitted program can mask or
+    reset it. ``x_next`` is differentiable like :func:`step` (the backward pass of a failed
+    step raises, as there is no valid gradient there)."""
+    k, x, u, p = _prep(model, x, u, params, kappa_grad, convert, ("x", "u"))
+    nx, nu, npar = _sizes(model)
+    _check("x", x, (nx,))
+    _check("u", u, (nu,))
+    leads = [x.shape[:-1], u.shape[:-1]] + ([p.shape[:-1]] if p is not None else [])
+    lead = _lead(leads)
+    x, u = _bcast(x, lead + (nx,)), _bcast(u, lead + (nu,))
+    with_params = p is not None
+    p = _bcast(p, lead + (npar,)) if with_params else _empty(lead)
+    return _status_fn(model, k, with_params, backend())(x, u, p)

@@ -50,6 +50,23 @@ pub fn step(model: &Model, x: &[f64], u: &[f64]) -> Result<Vec<f64>> {
     Ok(out)
 }
 
+/// One step that reports instead of failing: `(x⁺, status code)` with the codes of
+/// [`crate::SolveStatus::code`] (0 = converged). A step that did not converge returns its last
+/// iterate, flagged, so array programs (under `jit`) can mask it instead of aborting.
+pub fn step_with_status(model: &Model, x: &[f64], u: &[f64]) -> Result<(Vec<f64>, u8)> {
+    use crate::solver::newton;
+    use crate::step::{AppliedForces, validate_inputs};
+    let mut s = state_of(model, x)?;
+    let mut ws = Workspace::new(model);
+    validate_inputs(model, &s, &ws, u, &AppliedForces::default())?;
+    newton::prepare(model, &s, &mut ws, u, &AppliedForces::default());
+    let report = newton::solve(model, &s, &mut ws);
+    newton::write_state(model, &mut s, &ws);
+    let mut out = vec![0.0; nx(model)];
+    flat_of(model, &s, &mut out);
+    Ok((out, report.status.code()))
+}
+
 /// Adjoints `(x, u, params)` of one flat step given the adjoint of its output.
 pub fn step_vjp(
     model: &Model,
