@@ -185,3 +185,13 @@ def test_torch_library_opcheck_on_the_custom_ops():
     torch.library.opcheck(utm._step_vjp_op, (key, -1.0, x, u, p, g, False))
     us = torch.full((3, 1), 0.1, dtype=torch.float64)
     torch.library.opcheck(utm._rollout_op, (key, x, us, p, False))
+
+
+def test_torch_func_jacrev_equals_the_engine_jacobians():
+    m, x0 = SCENES["sliding_box"]()
+    x = torch.tensor(x0)
+    u = torch.full((m.nu,), 0.1, dtype=torch.float64)
+    ja, jb = torch.func.jacrev(lambda x, u: ut.step(m, x, u, kappa_grad=1e-6), argnums=(0, 1))(x, u)
+    a, b = ut.step_jacobians(m, x, u, kappa_grad=1e-6)
+    torch.testing.assert_close(ja, a, rtol=1e-9, atol=1e-11)
+    torch.testing.assert_close(jb, b, rtol=1e-9, atol=1e-11)
