@@ -267,8 +267,9 @@ fn settled(model: &Model, qvel: &[f64]) -> State {
     // settle on the floor, then give it a velocity
     let mut s = State::reference(model);
     let mut ws = Workspace::new(model);
+    let zero = vec![0.0; model.nu()];
     for _ in 0..20 {
-        step(model, &mut s, &mut ws, &[]).unwrap();
+        step(model, &mut s, &mut ws, &zero).unwrap();
     }
     let q = ukemi_engine::qpos(model, &s);
     let mut out = s.clone();
@@ -389,5 +390,30 @@ fn flat_step_vjp_matches_finite_differences_in_raw_coordinates() {
             "x[{i}]: fd {fd} vs {}",
             gx[i]
         );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 8, .. ProptestConfig::default() })]
+    /// Random sliding/spinning states and pushes of a ball on the floor, every contact model:
+    /// the Jacobians (state, control, all parameter groups) match the smoothed step.
+    #[test]
+    fn random_contact_states_match_the_smoothed_step(
+        m in 0usize..3,
+        v in prop::collection::vec(-1.0f64..1.0, 6),
+        push in -2.0f64..2.0,
+    ) {
+        let cm = [ContactModel::Nonlinear, ContactModel::Linear, ContactModel::Impact][m];
+        let b = contact_scenes::floor(ModelBuilder::new().timestep(0.01), 0.3);
+        let b = contact_scenes::free_body(
+            b, "ball", 1.0, Shape::Sphere { radius: 0.1 }, [0.0, 0.0, 0.1],
+            [1.0, 0.0, 0.0, 0.0], 0.3, cm,
+        );
+        let mut push_x = ActuatorSpec::motor("push", "ball_free", 0, 1.0);
+        push_x.ctrlrange = None;
+        let model = tight(b.actuator(push_x).compile().unwrap());
+        let qvel = [v[0], v[1], 0.3 * v[2] - 0.2, 3.0 * v[3], 3.0 * v[4], 3.0 * v[5]];
+        let s = settled(&model, &qvel);
+        check(&model, &s, &[push], Coordinates::Minimal, Some(1e-4), 1e-5);
     }
 }
