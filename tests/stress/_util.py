@@ -1,0 +1,76 @@
+"""Scene builders and the common stress assertion for ``tests/stress``.
+
+``UKEMI_STRESS=full`` runs every case at full length; the default is the reduced CI form.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+import ukemi
+
+FULL = os.environ.get("UKEMI_STRESS", "").lower() == "full"
+PENETRATION_TOL = -1e-8  # m: least signed distance allowed
+BOX_INERTIA = (1 / 150,) * 3  # 1 kg cube of side 0.2 m
+
+
+def steps(reduced: int, full: int) -> int:
+    """Step count for the current mode."""
+    return full if FULL else reduced
+
+
+def energies(model, traj) -> np.ndarray:
+    """Discrete total energy of every state of a rollout (J), (T+1,)."""
+    return np.array([model.make_state(qpos=q, qvel=v).energy()
+                     for q, v in zip(traj.qpos, traj.qvel, strict=True)])
+
+
+def failure_summary(traj) -> str:
+    bad = traj.status != "converged"
+    if not bad.any():
+        return "all converged"
+    kinds = {str(k): int(np.sum(traj.status == k)) for k in set(traj.status[bad])}
+    return f"{int(bad.sum())}/{len(bad)} unconverged {kinds}, first at step {int(np.argmax(bad))}"
+
+
+def assert_stable(model, traj, energy_gain: float = 1e-4, converged: bool = True) -> None:
+    """No solver failure, no NaN, no penetration below -1e-8 m, bounded energy.
+
+    Contacts are inelastic and friction dissipates, so the discrete energy may rise above its
+    initial value only by ``energy_gain`` relative to max(1 J, |E0|).
+    """
+    if converged:
+        assert traj.converged, failure_summary(traj)
+    assert np.all(np.isfinite(traj.qpos)) and np.all(np.isfinite(traj.qvel)), "non-finite state"
+    least = float(traj.min_distance.min())
+    at = int(traj.min_distance.argmin())
+    assert least >= PENETRATION_TOL, f"penetration {least:.3e} m at state {at}"
+    energy = energies(model, traj)
+    gain = float(np.max(energy - energy[0])) / max(1.0, abs(energy[0]))
+    assert gain <= energy_gain, f"energy grew by {gain:.3e} (relative)"
+
+
+def floor_builder(timestep: float = 0.01, friction: float = 0.5, contact: str = "nonlinear"):
+    b = ukemi.ModelBuilder(timestep=timestep)
+    b.add_geom("floor", "world", "plane", friction=friction, contact=contact)
+    return b
+
+
+def add_free(b, name: str, shape: str, size, mass: float, inertia, pos, quat=(1, 0, 0, 0),
+             friction: float = 0.5) -> None:
+    b.add_body(name, mass, inertia, pos=pos, quat=quat)
+    b.add_joint(name + "_free", "free", "world", name)
+    b.add_geom(name, name, shape, size=size, friction=friction)
+
+
+def box_stack(n: int, masses=None, gap: float = 1e-4, timestep: float = 0.01):
+    """``n`` cubes of side 0.2 m stacked with ``gap`` between them."""
+    b = floor_builder(timestep)
+    masses = masses or [1.0] * n
+    for i, mass in enumerate(masses):
+        inertia = tuple(mass * x for x in BOX_INERTIA)
+        add_free(b, f"b{i}", "box", (0.1, 0.1, 0.1), mass, inertia,
+                 (0, 0, 0.1 + i * (0.2 + gap)))
+    return b.compile()
