@@ -219,7 +219,8 @@ def test_non_convergence_is_an_error_naming_it():
     with pytest.raises(Exception, match="did not converge"):
         us = jnp.tile(u, (3, 1))
         jax.jit(lambda x: ujax.rollout(m, x, us))(x).block_until_ready()
-    with pytest.raises(Exception, match=r"batch element 0\) did not converge"):
+    # both elements fail; which one rayon reports first is not specified
+    with pytest.raises(Exception, match=r"batch element \d\) did not converge"):
         xs = jnp.stack([x, x])
         jax.jit(jax.vmap(lambda x: ujax.step(m, x, u)))(xs).block_until_ready()
     # the process survives; with enough iterations the same step converges

@@ -112,6 +112,26 @@ impl Error {
             reason: reason.into(),
         }
     }
+    /// [`Error::NotConverged`] with `where_` appended to its context (e.g. `" (step 7)"`);
+    /// other errors unchanged.
+    pub fn at(self, where_: impl std::fmt::Display) -> Self {
+        match self {
+            Error::NotConverged {
+                context,
+                status,
+                iterations,
+                residual,
+                complementarity,
+            } => Error::NotConverged {
+                context: format!("{context}{where_}"),
+                status,
+                iterations,
+                residual,
+                complementarity,
+            },
+            other => other,
+        }
+    }
     /// Shorthand for [`Error::Shape`].
     pub fn shape(name: impl Into<String>, expected: &[usize], got: &[usize]) -> Self {
         Error::Shape {

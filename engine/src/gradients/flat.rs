@@ -173,22 +173,7 @@ pub fn rollout(model: &Model, x0: &[f64], us: &[f64], nstep: usize) -> Result<Ve
             Coordinates::Minimal,
             &mut ws,
         )
-        .map_err(|e| match e {
-            Error::NotConverged {
-                context,
-                status,
-                iterations,
-                residual,
-                complementarity,
-            } => Error::NotConverged {
-                context: format!("{context} (step {k})"),
-                status,
-                iterations,
-                residual,
-                complementarity,
-            },
-            other => other,
-        })?;
+        .map_err(|e| e.at(format!(" (step {k})")))?;
         flat_of(model, &s, &mut out[(k + 1) * n..(k + 2) * n]);
     }
     Ok(out)
@@ -283,22 +268,7 @@ pub fn batched<T: Send>(
                 } else {
                     &models[i]
                 };
-                f(m, i).map_err(|e| match e {
-                    Error::NotConverged {
-                        context,
-                        status,
-                        iterations,
-                        residual,
-                        complementarity,
-                    } => Error::NotConverged {
-                        context: format!("{context} (batch element {i})"),
-                        status,
-                        iterations,
-                        residual,
-                        complementarity,
-                    },
-                    other => other,
-                })
+                f(m, i).map_err(|e| e.at(format!(" (batch element {i})")))
             })
             .collect()
     };

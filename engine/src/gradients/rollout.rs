@@ -111,7 +111,7 @@ pub(crate) fn rollout_vjp_with(
             coords,
             &mut ws,
         )
-        .map_err(|e| at_step(e, k))?;
+        .map_err(|e| e.at(format!(" (step {k})")))?;
         states.push(next);
     }
     let wrt = Wrt {
@@ -141,7 +141,7 @@ pub(crate) fn rollout_vjp_with(
     for k in (0..nstep).rev() {
         let u = &ctrls[k * nu..(k + 1) * nu];
         let mut lin = Linearization::new(model, &states[k], u, coords, wrt, kappa_grad)
-            .map_err(|e| at_step(e, k))?;
+            .map_err(|e| e.at(format!(" (step {k})")))?;
         let a = lin.vjp(model, &adj)?;
         out.ctrls[k * nu..(k + 1) * nu].copy_from_slice(&a.ctrl);
         for (p, g) in out.params.iter_mut().zip(&a.params) {
@@ -159,23 +159,4 @@ pub(crate) fn rollout_vjp_with(
     }
     out.state0 = adj;
     Ok((out, states))
-}
-
-fn at_step(e: Error, k: usize) -> Error {
-    match e {
-        Error::NotConverged {
-            context,
-            status,
-            iterations,
-            residual,
-            complementarity,
-        } => Error::NotConverged {
-            context: format!("{context} (step {k})"),
-            status,
-            iterations,
-            residual,
-            complementarity,
-        },
-        other => other,
-    }
 }
