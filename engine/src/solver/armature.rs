@@ -14,7 +14,7 @@ use nalgebra::Vector3;
 use crate::joints::Joint;
 use crate::model::Model;
 use crate::model::topology_body_node as body_node;
-use crate::state::{State, Workspace};
+use crate::state::State;
 
 fn slot(model: &Model, b: usize) -> usize {
     body_node(b).map_or(0, |n| model.topology.pattern.offset(n))
@@ -68,43 +68,6 @@ pub(crate) fn add_armature_residual(
                 let ob = slot(model, b);
                 for i in 0..6 {
                     residual[ob + i] += row[6 * side + i] * f;
-                }
-            }
-        }
-    }
-}
-
-/// `J_aᵀ a J_b` into the body blocks (a, b) for a, b ∈ {parent, child}.
-pub(crate) fn add_armature_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint) {
-    let t = &model.topology;
-    let fa = ws.free_adr[ji];
-    let sides = [(0, joint.parent), (1, joint.child)];
-    for (sa, a) in sides {
-        for (sb, b) in sides {
-            if a == 0 || b == 0 {
-                continue;
-            }
-            let off = if a == b {
-                t.body_diag[a]
-            } else {
-                match t.blocks[ji].pc {
-                    Some((pc, cp)) => {
-                        if sa == 0 {
-                            pc
-                        } else {
-                            cp
-                        }
-                    }
-                    None => continue,
-                }
-            };
-            for (r, &arm) in joint.armature.iter().enumerate() {
-                let row = &ws.free_jac[fa + 12 * r..fa + 12 * r + 12];
-                for i in 0..6 {
-                    for k in 0..6 {
-                        ws.matrix.values[off + 6 * i + k] +=
-                            arm * row[6 * sa + i] * row[6 * sb + k];
-                    }
                 }
             }
         }

@@ -429,16 +429,15 @@ fn assemble_joint(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h
             }
         }
     }
-    if joint.has_damper() {
-        add_damper_blocks(model, ws, ji, joint, h);
-    }
-    if joint.has_armature() {
-        super::armature::add_armature_blocks(model, ws, ji, joint);
+    if joint.has_damper() || joint.has_armature() {
+        add_free_coupling_blocks(model, ws, ji, joint, h);
     }
 }
 
-/// `h J_aᵀ D J_b` into the body blocks (a, b) for a, b ∈ {parent, child}.
-fn add_damper_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h: f64) {
+/// `J_aᵀ C J_b` into the body blocks (a, b) for a, b ∈ {parent, child}, with the per-dof
+/// coefficient `C = h · damping + armature`: implicit dampers and rotor inertia both act on the
+/// next free-coordinate rates, so they share one coupling term.
+fn add_free_coupling_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h: f64) {
     let t = &model.topology;
     let fa = ws.free_adr[ji];
     let sides = [(0, joint.parent), (1, joint.child)];
@@ -463,7 +462,7 @@ fn add_damper_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint
             };
             for r in 0..joint.nfree() {
                 let row = &ws.free_jac[fa + 12 * r..fa + 12 * r + 12];
-                let d = h * joint.damping[r];
+                let d = h * joint.damping[r] + joint.armature.get(r).copied().unwrap_or(0.0);
                 for i in 0..6 {
                     for k in 0..6 {
                         ws.matrix.values[off + 6 * i + k] += d * row[6 * sa + i] * row[6 * sb + k];
