@@ -239,6 +239,17 @@ pub(crate) fn models_for(
     }
 }
 
+/// Concatenate per-element triples of outputs into three flat buffers (batch-major).
+fn concat3(parts: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let (mut a, mut b, mut c) = (vec![], vec![], vec![]);
+    for (x, y, z) in parts {
+        a.extend(x);
+        b.extend(y);
+        c.extend(z);
+    }
+    (a, b, c)
+}
+
 fn slice2<'a>(a: &'a Option<PyReadonlyArray2<'_, f64>>) -> PyResult<Option<&'a [f64]>> {
     a.as_ref()
         .map(|x| x.as_slice())
@@ -312,12 +323,7 @@ pub fn flat_step_vjp<'py>(
                 })
             })
             .py()?;
-        let (mut gx, mut gu, mut gp) = (vec![], vec![], vec![]);
-        for (x, u, p) in out {
-            gx.extend(x);
-            gu.extend(u);
-            gp.extend(p);
-        }
+        let (gx, gu, gp) = concat3(out);
         Ok((
             PyArray1::from_vec(py, gx).reshape([b, n])?,
             PyArray1::from_vec(py, gu).reshape([b, nu])?,
@@ -400,12 +406,7 @@ pub fn flat_rollout_vjp<'py>(
                 })
             })
             .py()?;
-        let (mut gx, mut gu, mut gp) = (vec![], vec![], vec![]);
-        for (x, u, p) in out {
-            gx.extend(x);
-            gu.extend(u);
-            gp.extend(p);
-        }
+        let (gx, gu, gp) = concat3(out);
         Ok((
             PyArray1::from_vec(py, gx).reshape([b, n])?,
             PyArray1::from_vec(py, gu).reshape([b, t, nu])?,
@@ -463,12 +464,7 @@ pub fn flat_step_jacobians<'py>(
                 })
             })
             .py()?;
-        let (mut ga, mut gb, mut gc) = (vec![], vec![], vec![]);
-        for (a, bm, c) in out {
-            ga.extend(a);
-            gb.extend(bm);
-            gc.extend(c);
-        }
+        let (ga, gb, gc) = concat3(out);
         Ok((
             PyArray1::from_vec(py, ga).reshape([b, n, n])?,
             PyArray1::from_vec(py, gb).reshape([b, n, nu])?,
