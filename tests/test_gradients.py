@@ -281,3 +281,17 @@ def _tangent_difference(model, base, other):
     out[a + 3:nv] = q1[a + 4:] - q0[a + 4:]
     out[nv:] = np.array(other.qvel) - np.array(base.qvel)
     return out
+
+
+def test_batched_kernels_reject_mismatched_batches_by_name():
+    """The raw batched kernels (what the JAX/torch layers call) name the bad argument instead of
+    reaching a panic."""
+    m = pendulum()
+    n = m.nq + m.nv
+    with pytest.raises(ukemi.ShapeError, match="us"):
+        ukemi._ukemi._flat_step(m, np.zeros((3, n)), np.zeros((2, m.nu)))
+    with pytest.raises(ukemi.ShapeError, match="adj"):
+        ukemi._ukemi._flat_step_vjp(m, np.zeros((2, n)), np.zeros((2, m.nu)), np.zeros((1, n)), None)
+    with pytest.raises(ukemi.ShapeError, match="adj"):
+        ukemi._ukemi._flat_rollout_vjp(m, np.zeros((1, n)), np.zeros((1, 4, m.nu)),
+                                       np.zeros((1, 3, n)), None)

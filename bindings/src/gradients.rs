@@ -250,6 +250,16 @@ fn concat3(parts: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>) -> (Vec<f64>, Vec<f64>, V
     (a, b, c)
 }
 
+/// Batched arguments must share the leading batch size (the Python layer broadcasts first).
+fn same_batch(name: &str, want: usize, got: usize) -> PyResult<()> {
+    if want != got {
+        return Err(crate::errors::ShapeError::new_err(format!(
+            "shape of `{name}`: batch size {got} differs from the states' {want}"
+        )));
+    }
+    Ok(())
+}
+
 fn slice2<'a>(a: &'a Option<PyReadonlyArray2<'_, f64>>) -> PyResult<Option<&'a [f64]>> {
     a.as_ref()
         .map(|x| x.as_slice())
@@ -269,6 +279,7 @@ pub fn flat_step<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     guard(|| {
         let (b, n, nu) = (xs.shape()[0], xs.shape()[1], us.shape()[1]);
+        same_batch("us", b, us.shape()[0])?;
         let (xs, us) = (xs.as_slice()?, us.as_slice()?);
         let p = slice2(&params)?;
         let m = model.inner.clone();
@@ -304,6 +315,8 @@ pub fn flat_step_vjp<'py>(
 )> {
     guard(|| {
         let (b, n, nu) = (xs.shape()[0], xs.shape()[1], us.shape()[1]);
+        same_batch("us", b, us.shape()[0])?;
+        same_batch("adj", b, adj.shape()[0])?;
         let (xs, us, adj) = (xs.as_slice()?, us.as_slice()?, adj.as_slice()?);
         let p = slice2(&params)?;
         let m = model.inner.clone();
@@ -345,6 +358,7 @@ pub fn flat_rollout<'py>(
     guard(|| {
         let (b, n) = (x0s.shape()[0], x0s.shape()[1]);
         let (t, nu) = (us.shape()[1], us.shape()[2]);
+        same_batch("us", b, us.shape()[0])?;
         let (x0s, us) = (x0s.as_slice()?, us.as_slice()?);
         let p = slice2(&params)?;
         let m = model.inner.clone();
@@ -386,6 +400,15 @@ pub fn flat_rollout_vjp<'py>(
     guard(|| {
         let (b, n) = (x0s.shape()[0], x0s.shape()[1]);
         let (t, nu) = (us.shape()[1], us.shape()[2]);
+        same_batch("us", b, us.shape()[0])?;
+        same_batch("adj", b, adj.shape()[0])?;
+        if adj.shape()[1] != t + 1 {
+            return Err(crate::errors::ShapeError::new_err(format!(
+                "shape of `adj`: {} states, expected T + 1 = {}",
+                adj.shape()[1],
+                t + 1
+            )));
+        }
         let (x0s, us, adj) = (x0s.as_slice()?, us.as_slice()?, adj.as_slice()?);
         let p = slice2(&params)?;
         let m = model.inner.clone();
@@ -446,6 +469,7 @@ pub fn flat_step_jacobians<'py>(
 )> {
     guard(|| {
         let (b, n, nu) = (xs.shape()[0], xs.shape()[1], us.shape()[1]);
+        same_batch("us", b, us.shape()[0])?;
         let (xs, us) = (xs.as_slice()?, us.as_slice()?);
         let p = slice2(&params)?;
         let m = model.inner.clone();
