@@ -84,3 +84,54 @@ def test_contact_argument_errors():
     b2.add_geom("d", "world", "sphere", size=(0.1,))
     with pytest.raises(ukemi.UnsupportedError, match="geom"):
         b2.compile()
+
+
+def _sliding_ball_state(m):
+    """Ball resting on the floor with a sideways velocity: contact and friction cone active."""
+    s = m.make_state(qpos=[0, 0, 0.1, 1, 0, 0, 0], qvel=[2.0, 0.5, 0, 0, 0, 0])
+    for _ in range(3):
+        s, _ = ukemi.step(m, s)
+    return s
+
+
+@pytest.mark.parametrize("nt_scaling", [True, False])
+def test_solver_trace_records_a_converging_solve(nt_scaling):
+    m = ball_on_floor(z=0.1).with_options(nt_scaling=nt_scaling, warm_start=False)
+    s = _sliding_ball_state(m)
+    nxt, info, trace = ukemi.solver_trace(m, s, condition=True)
+    assert info.status == "converged"
+    n = info.iterations
+    assert len(trace["residual"]) == n and n > 3
+    assert np.all(trace["attempt"] == 0)
+    # the trace is of the same solve as ukemi.step
+    ref, ref_info = ukemi.step(m, s)
+    assert ref_info.iterations == n
+    np.testing.assert_array_equal(nxt.qvel, ref.qvel)
+    # interior-point progress: μ falls by orders of magnitude, every step length in (0, 1]
+    assert trace["mu"][-1] < 1e-6 * trace["mu"][0]
+    assert np.all((trace["alpha"] > 0) & (trace["alpha"] <= 1))
+    # the records are taken before each iteration: the last one is still above tolerance
+    assert trace["complementarity"][-1] > 0 or trace["residual"][-1] > 0
+    # Newton matrices are finite and non-singular; conditioning grows as contact hardens
+    cond = trace["condition"]
+    assert np.all(np.isfinite(cond)) and np.all(cond >= 1)
+    assert cond[-1] > cond[0]
+
+
+def test_nesterov_todd_scaling_reaches_the_same_step():
+    m = ball_on_floor(z=0.1)
+    s = _sliding_ball_state(m)
+    a, ia = ukemi.step(m, s)
+    b, ib = ukemi.step(m.with_options(nt_scaling=False), s)
+    assert ia.converged and ib.converged
+    # same complementarity solution, different paths to it
+    np.testing.assert_allclose(a.qvel, b.qvel, atol=1e-9)
+    np.testing.assert_allclose(a.contact_impulse, b.contact_impulse, atol=1e-9)
+
+
+def test_solver_trace_without_condition_numbers():
+    m = ball_on_floor(z=0.1)
+    _, info, trace = ukemi.solver_trace(m, m.make_state())
+    assert np.all(np.isnan(trace["condition"]))
+    with pytest.raises(TypeError):
+        ukemi.solver_trace(m, "not a state")

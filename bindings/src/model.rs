@@ -448,7 +448,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -463,6 +463,7 @@ impl PyModel {
         regularization: Option<f64>,
         kappa_grad: Option<f64>,
         activation_margin: Option<f64>,
+        nt_scaling: Option<bool>,
     ) -> PyResult<PyModel> {
         guard(|| {
             let mut o = self.inner.options.clone();
@@ -475,6 +476,7 @@ impl PyModel {
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);
             o.undercut = undercut.unwrap_or(o.undercut);
             o.warm_start = warm_start.unwrap_or(o.warm_start);
+            o.nt_scaling = nt_scaling.unwrap_or(o.nt_scaling);
             // activation_margin = inf keeps every contact candidate active
             o.activation_margin = activation_margin.unwrap_or(o.activation_margin);
             // kappa_grad = 0 selects the exact (unsmoothed) derivative

@@ -234,3 +234,59 @@ impl Recorder {
         Ok(d)
     }
 }
+
+/// One step with every interior-point iteration recorded: `(next_state, info, trace)`, trace a
+/// dict of per-iteration arrays (see `ukemi_engine::IterationRecord`).
+#[pyfunction]
+#[pyo3(name = "_solver_trace")]
+pub fn solver_trace<'py>(
+    py: Python<'py>,
+    model: &PyModel,
+    state: &PyState,
+    ctrl: PyReadonlyArray1<'_, f64>,
+    condition: bool,
+) -> PyResult<(PyState, PyStepInfo, Bound<'py, PyDict>)> {
+    guard(|| {
+        same_model(model, state)?;
+        let ctrl = ctrl.as_slice()?.to_vec();
+        let m = model.inner.clone();
+        let mut next = state.inner.clone();
+        let (report, records) = py.detach(|| {
+            let mut ws = Workspace::new(&m);
+            ws.set_trace(true, condition);
+            let report = ukemi_engine::step(&m, &mut next, &mut ws, &ctrl);
+            (report, ws.trace().to_vec())
+        });
+        let report = report.py()?;
+        let out = PyDict::new(py);
+        let column = |f: fn(&ukemi_engine::IterationRecord) -> f64| -> Vec<f64> {
+            records.iter().map(f).collect()
+        };
+        out.set_item(
+            "attempt",
+            PyArray1::from_vec(py, records.iter().map(|r| r.attempt as i64).collect()),
+        )?;
+        out.set_item("residual", PyArray1::from_vec(py, column(|r| r.residual)))?;
+        out.set_item(
+            "complementarity",
+            PyArray1::from_vec(py, column(|r| r.complementarity)),
+        )?;
+        out.set_item("mu", PyArray1::from_vec(py, column(|r| r.mu)))?;
+        out.set_item("kappa", PyArray1::from_vec(py, column(|r| r.kappa)))?;
+        out.set_item("alpha_aff", PyArray1::from_vec(py, column(|r| r.alpha_aff)))?;
+        out.set_item("alpha", PyArray1::from_vec(py, column(|r| r.alpha)))?;
+        out.set_item(
+            "corrector",
+            PyArray1::from_vec(py, records.iter().map(|r| r.corrector).collect()),
+        )?;
+        out.set_item("condition", PyArray1::from_vec(py, column(|r| r.condition)))?;
+        Ok((
+            PyState {
+                model: model.inner.clone(),
+                inner: next,
+            },
+            report.into(),
+            out,
+        ))
+    })
+}

@@ -48,5 +48,5 @@ pub use joints::{Joint, JointKind};
 pub use model::{
     ActuatorSpec, BodySpec, GeomSpec, JointSpec, Keyframe, Model, ModelBuilder, Options,
 };
-pub use state::{SolveStatus, State, StepReport, Workspace};
+pub use state::{IterationRecord, SolveStatus, State, StepReport, Workspace};
 pub use step::{AppliedForces, rollout, step, step_with};

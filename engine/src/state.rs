@@ -207,6 +207,32 @@ pub struct StepReport {
     pub complementarity: f64,
 }
 
+/// One interior-point iteration, as recorded by [`Workspace::set_trace`] (the convergence study
+/// of Dojo's Figs. 9-10 and solver debugging).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IterationRecord {
+    /// Attempt within the step: 0 = first solve, 1 = cold retry, 2.. = re-solves after a
+    /// missed contact.
+    pub attempt: u8,
+    /// Equality residual ∞-norm before the iteration (eq. 49).
+    pub residual: f64,
+    /// Complementarity violation before the iteration (eq. 50).
+    pub complementarity: f64,
+    /// Mean complementarity `μ`.
+    pub mu: f64,
+    /// Central-path target of the corrector.
+    pub kappa: f64,
+    /// Affine (predictor) step length.
+    pub alpha_aff: f64,
+    /// Accepted step length (0 when the line search failed).
+    pub alpha: f64,
+    /// Whether Mehrotra's corrected direction was accepted (else the plain centred Newton one).
+    pub corrector: bool,
+    /// 2-norm condition-number estimate of the Newton matrix (only with `set_trace(true, true)`;
+    /// NaN otherwise).
+    pub condition: f64,
+}
+
 /// Scratch memory for [`crate::step`], allocated once per model and reused (no allocation in
 /// steady state).
 pub struct Workspace {
@@ -242,6 +268,18 @@ pub struct Workspace {
     /// [`crate::Options::activation_margin`]); inactive ones carry no impulse and no solver work.
     pub(crate) active: Vec<bool>,
     pub(crate) topology_id: u64,
+    /// Nesterov–Todd scaling of each contact's friction-cone pair at the current interior-point
+    /// iterate (`None`: unscaled rows), used while `nt_on` (the IPM's directions; the
+    /// gradients linearise the unscaled residual).
+    pub(crate) nt: Vec<Option<crate::contact::cone::NtScaling>>,
+    pub(crate) nt_on: bool,
+    /// Set for a retry without scaling (see `newton::solve_active`).
+    pub(crate) nt_disabled: bool,
+    /// Per-iteration records of the last step (`None`: not recorded, the default).
+    pub(crate) trace: Option<Vec<IterationRecord>>,
+    /// Whether the trace also estimates condition numbers (dense, slow).
+    pub(crate) trace_condition: bool,
+    pub(crate) attempt: u8,
 }
 
 impl Workspace {
@@ -255,6 +293,19 @@ impl Workspace {
     /// Per candidate, whether it took part in the last step (see [`Self::active_contacts`]).
     pub fn contact_active(&self) -> &[bool] {
         &self.active
+    }
+
+    /// Record every interior-point iteration of the following steps (allocates; for studies
+    /// and debugging). `condition` also estimates the Newton matrix's condition number per
+    /// iteration from a dense copy (small models only).
+    pub fn set_trace(&mut self, on: bool, condition: bool) {
+        self.trace = on.then(Vec::new);
+        self.trace_condition = on && condition;
+    }
+
+    /// The iterations of the last step (empty unless [`Self::set_trace`] is on).
+    pub fn trace(&self) -> &[IterationRecord] {
+        self.trace.as_deref().unwrap_or(&[])
     }
 
     /// Scratch sized for `model`.
@@ -299,6 +350,12 @@ impl Workspace {
             free_jac: vec![0.0; nfree],
             free_adr,
             topology_id: model.topology_id(),
+            nt: vec![None; model.ncontact()],
+            nt_on: false,
+            nt_disabled: false,
+            trace: None,
+            trace_condition: false,
+            attempt: 0,
         }
     }
 }

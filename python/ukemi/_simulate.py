@@ -60,6 +60,27 @@ def step(model, state, ctrl=None, *, qfrc_applied=None, xfrc_applied=None, on_fa
     return next_state, info
 
 
+def solver_trace(model, state, ctrl=None, *, condition=False):
+    """Take one step and record every interior-point iteration (convergence studies, debugging).
+
+    Args:
+        model, state, ctrl: as for :func:`step`.
+        condition: also estimate the 2-norm condition number of the Newton matrix at each
+            iteration (a dense SVD: small models only).
+
+    Returns:
+        (next_state, info, trace): ``trace`` is a dict of per-iteration arrays: ``attempt``
+        (0 = first solve, 1 = cold retry, 2.. = re-solve after a missed contact), ``residual``
+        and ``complementarity`` (the violations before the iteration), ``mu`` (mean
+        complementarity), ``kappa`` (centring target), ``alpha_aff``, ``alpha`` (accepted step,
+        0 = line search failed), ``corrector`` (Mehrotra's direction accepted), ``condition``
+        (NaN unless requested). Never raises on non-convergence: read ``info.status``.
+    """
+    _check_types(model, state)
+    ctrl = np.zeros(model.nu) if ctrl is None else as_float_array("ctrl", ctrl, (model.nu,))
+    return _ukemi._solver_trace(model, state, ctrl, bool(condition))
+
+
 @dataclass(frozen=True)
 class Trajectory:
     """Result of :func:`rollout`. Arrays have a leading time axis of length T + 1 (states) or T

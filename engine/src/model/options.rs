@@ -51,6 +51,10 @@ pub struct Options {
     /// simulated solution). The step itself is always solved to `kappa_tol`; see
     /// [`crate::gradients`]. Default `None`.
     pub kappa_grad: Option<f64>,
+    /// Nesterov–Todd scaling of the friction cones' Newton rows (see
+    /// [`crate::contact::cone::NtScaling`]). Default true; false gives Dojo's unscaled
+    /// linearisation of `ξ ∘ η = κe` (kept for comparison).
+    pub nt_scaling: bool,
 }
 
 impl Default for Options {
@@ -70,6 +74,7 @@ impl Default for Options {
             tau_max: 0.99,
             activation_margin: f64::INFINITY,
             kappa_grad: None,
+            nt_scaling: true,
         }
     }
 }

@@ -11,7 +11,7 @@
 //! ```
 use nalgebra::{Matrix3, Vector3};
 
-use crate::contact::cone::{orthant_step, soc_product, soc_step};
+use crate::contact::cone::{NtScaling, arrow, orthant_step, soc_product, soc_step};
 use crate::contact::{ContactFrame, ContactModel, witness};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::model::Model;
@@ -437,10 +437,12 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             }
             continue;
         }
+        let nt = if ws.nt_on { ws.nt[c].as_ref() } else { None };
         contact_diag(
             contact.model,
             contact.friction,
             &w[o..o + dim],
+            nt,
             &mut ws.matrix.values[diag..diag + dim * dim],
         );
         let [a, b] = t.contact_bodies[c];
@@ -500,8 +502,9 @@ fn chain_row(row: &[f64], h: f64, dphi: &Matrix3<f64>) -> [f64; 6] {
 }
 
 /// Diagonal block of a contact node (row-major `dim × dim`), derivatives of its rows w.r.t. its
-/// own variables.
-fn contact_diag(model: ContactModel, mu: f64, x: &[f64], d: &mut [f64]) {
+/// own variables; with a Nesterov–Todd scaling `nt`, the friction-cone rows are those of the
+/// scaled complementarity `(W ξ) ∘ (W⁻¹ η)` (see [`scale_soc_rows`]).
+fn contact_diag(model: ContactModel, mu: f64, x: &[f64], nt: Option<&NtScaling>, d: &mut [f64]) {
     let dim = model.dim();
     d.fill(0.0);
     let mut set = |r: usize, c: usize, v: f64| d[r * dim + c] = v;
@@ -527,6 +530,17 @@ fn contact_diag(model: ContactModel, mu: f64, x: &[f64], d: &mut [f64]) {
                 set(4 + i, 5, x[3 + i]);
                 set(4 + i, 6 + i, x[2]);
                 set(6 + i, 6 + i, 1.0); // η₂:₃ - v_t
+            }
+            if let Some(nt) = nt {
+                // ∂/∂ξ = Arw(λ) W, ∂/∂η = Arw(λ) W⁻¹
+                let a = arrow(&nt.lambda);
+                let (dx, ds) = (a * nt.w, a * nt.w_inv);
+                for r in 0..3 {
+                    for k in 0..3 {
+                        set(3 + r, 2 + k, dx[(r, k)]);
+                        set(3 + r, 5 + k, ds[(r, k)]);
+                    }
+                }
             }
         }
         ContactModel::Linear => {
@@ -626,23 +640,69 @@ pub(crate) fn mean_complementarity(
     sum / degree.max(1) as f64
 }
 
-/// Mehrotra's second-order term: add `Δb_aff ∘ Δc_aff` to the complementarity rows.
+/// Nesterov–Todd scalings of the active friction cones at the iterate `ws.w` (see
+/// [`NtScaling`]); a pair that is not strictly interior keeps unscaled rows.
+pub(crate) fn update_scalings(model: &Model, ws: &mut Workspace) {
+    let t = &model.topology;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        ws.nt[c] = None;
+        if ws.active[c] && contact.model == ContactModel::Nonlinear {
+            let o = t.pattern.offset(t.contact_node[c]);
+            ws.nt[c] = NtScaling::new(&v3(&ws.w, o + SOC.0), &v3(&ws.w, o + SOC.1));
+        }
+    }
+}
+
+/// Replace the friction-cone complementarity rows `ξ ∘ η - κe` of the residual at `w` by the
+/// scaled `(W ξ) ∘ (W⁻¹ η) - κe` with the current scalings held fixed: the residual whose
+/// Newton direction the scaled matrix rows give, so the line search measures what the step
+/// decreases. Both vanish on the same central path (`W` is a cone automorphism).
+pub(crate) fn scale_soc_rows(model: &Model, ws: &mut Workspace, trial: bool, kappa: f64) {
+    if !ws.nt_on {
+        return;
+    }
+    let t = &model.topology;
+    let w = if trial { &ws.w_trial } else { &ws.w };
+    for (c, nt) in ws.nt.iter().enumerate() {
+        let Some(nt) = nt else { continue };
+        let o = t.pattern.offset(t.contact_node[c]);
+        let (xi, eta) = (nt.w * v3(w, o + SOC.0), nt.w_inv * v3(w, o + SOC.1));
+        let r = soc_product(&xi, &eta);
+        ws.residual[o + SOC.2] = r[0] - kappa;
+        ws.residual[o + SOC.2 + 1] = r[1];
+        ws.residual[o + SOC.2 + 2] = r[2];
+    }
+}
+
+/// Mehrotra's second-order term: add `Δb_aff ∘ Δc_aff` to the complementarity rows (in the
+/// scaled variables `WΔξ`, `W⁻¹Δη` for a friction cone with a scaling in `nt`).
 pub(crate) fn add_mehrotra_correction(
     model: &Model,
     active: &[bool],
+    nt: &[Option<NtScaling>],
     delta_aff: &[f64],
     residual: &mut [f64],
 ) {
     for_each_pair(model, active, |o, p, d, row, soc| {
-        if soc {
-            let c = soc_product(&v3(delta_aff, o + p), &v3(delta_aff, o + d));
-            for i in 0..3 {
-                residual[o + row + i] += c[i];
-            }
-        } else {
+        if !soc {
             residual[o + row] += delta_aff[o + p] * delta_aff[o + d];
         }
     });
+    let t = &model.topology;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        if !active[c] || contact.model != ContactModel::Nonlinear {
+            continue;
+        }
+        let o = t.pattern.offset(t.contact_node[c]);
+        let (dp, dd) = (v3(delta_aff, o + SOC.0), v3(delta_aff, o + SOC.1));
+        let corr = match &nt[c] {
+            Some(s) => soc_product(&(s.w * dp), &(s.w_inv * dd)),
+            None => soc_product(&dp, &dd),
+        };
+        for i in 0..3 {
+            residual[o + SOC.2 + i] += corr[i];
+        }
+    }
 }
 
 /// Copy the inequality variables of the solved iterate into the state (warm start and output).

@@ -108,6 +108,10 @@ pub(crate) fn prepare(
     forces: &AppliedForces,
 ) {
     prepare_forces(model, state, ws, ctrl, forces);
+    ws.attempt = 0;
+    if let Some(trace) = ws.trace.as_mut() {
+        trace.clear();
+    }
     // initial iterate: previous velocities and impulses (warm start)
     for b in 1..model.nbody() {
         let o = body_slot(model, b);
@@ -510,6 +514,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             ws.active.fill(true);
         }
         let iterations = report.iterations;
+        ws.attempt = 2 + round as u8;
         restart_warm(model, state, ws);
         report = solve_active(model, state, ws);
         report.iterations += iterations;
@@ -529,18 +534,30 @@ fn restart_warm(model: &Model, state: &State, ws: &mut Workspace) {
     super::inequality::initialize(model, state, ws, model.options.warm_start);
 }
 
-/// The interior-point solve with the current activation, retried cold once on failure.
+/// The interior-point solve with the current activation; on failure retried cold, then cold
+/// with unscaled friction-cone rows (each rescues steps the others stall on: a warm start sits
+/// on the previous solution's cone boundary, poor when contacts change state; the scaled and
+/// unscaled directions stall in different degenerate configurations).
 fn solve_active(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
-    let first = super::ipm::solve(model, state, ws);
-    if first.status == SolveStatus::Converged || !model.options.warm_start {
-        return first;
+    let mut report = super::ipm::solve(model, state, ws);
+    let retries: &[bool] = match (model.options.warm_start, model.options.nt_scaling) {
+        (true, true) => &[true, false],
+        (true, false) | (false, true) => &[false],
+        (false, false) => &[],
+    };
+    for &scaled in retries {
+        if report.status == SolveStatus::Converged {
+            break;
+        }
+        restart_cold(model, state, ws);
+        ws.attempt += 1;
+        ws.nt_disabled = !scaled;
+        let mut next = super::ipm::solve(model, state, ws);
+        ws.nt_disabled = false;
+        next.iterations += report.iterations;
+        report = next;
     }
-    // A warm start sits on the previous solution's cone boundary; when contacts change state
-    // (a box landing on another) that is a poor start. Retry from the neutral point.
-    restart_cold(model, state, ws);
-    let mut second = super::ipm::solve(model, state, ws);
-    second.iterations += first.iterations;
-    second
+    report
 }
 
 fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
