@@ -42,12 +42,15 @@ def _vec(text: str | None, n: int, default: float = 0.0) -> np.ndarray:
     return np.array([float(s) for s in text.split()]) if text else np.full(n, default)
 
 
-_SEGMENT_TYPES = ("capsule", "cylinder", "sphere")
+_SEGMENT_TYPES = ("capsule", "cylinder", "sphere", "box")
 
 
 def _segment(geom: ET.Element) -> tuple[np.ndarray, np.ndarray, float] | None:
     """(local from, local to, radius) of a capsule, cylinder or sphere geom (renderer only)."""
     size = _vec(geom.get("size"), 1, 0.02)
+    if geom.get("type") == "box":  # drawn as a disk of its first half-size
+        centre = _vec(geom.get("pos"), 3)
+        return centre, centre, float(size[0])
     if geom.get("fromto"):
         ft = _vec(geom.get("fromto"), 6)
         return ft[:3], ft[3:], float(size[0])
@@ -70,6 +73,7 @@ class MjcfInfo:
     sites: dict[str, tuple[int, np.ndarray]] = field(default_factory=dict)  #: name -> (body, local pos)
     segments: list[tuple[int, np.ndarray, np.ndarray, float]] = field(default_factory=list)
     #: (body, local from, local to, radius) of capsule, cylinder and sphere geoms
+    actuator_joints: list[str] = field(default_factory=list)  #: joint of each actuator, in order
 
 
 @functools.lru_cache(maxsize=64)
@@ -91,6 +95,8 @@ def mjcf_info(path: str) -> MjcfInfo:
 
     for wb in root.iter("worldbody"):
         visit(wb, 0)
+    for act in root.iter("actuator"):
+        info.actuator_joints.extend(a.get("joint", "") for a in act)
     return info
 
 
