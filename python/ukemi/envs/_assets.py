@@ -14,8 +14,9 @@ import numpy as np
 from .._loaders import gymnasium_asset_path
 from .._ukemi import Model
 
-# The loader reports MuJoCo solver options it ignores; the env docstrings document them.
-_BENIGN = "ukemi's own integrator and interior-point solver are used"
+# The loader reports MuJoCo solver options (and humanoid.xml's passive tendons) it ignores; the
+# env docstrings document them.
+_BENIGN = ("ukemi's own integrator and interior-point solver are used", "passive tendon ignored")
 
 
 def asset_path(xml_file: str) -> Path:
@@ -30,7 +31,8 @@ def asset_path(xml_file: str) -> Path:
 def load_model(path: str, timestep: float | None, options: tuple[tuple[str, float], ...]) -> Model:
     """Load once per (file, options); ``Model`` is immutable, so envs share it."""
     with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=f".*{_BENIGN}.*")
+        for message in _BENIGN:
+            warnings.filterwarnings("ignore", message=f".*{message}.*")
         model = Model.from_xml_path(path)
     opts = dict(options)
     if timestep is not None:
