@@ -45,3 +45,9 @@ def test_torch_policy_example_lowers_the_cost(tmp_path):
     _, curve = run("torch_policy", "--iters", "4", "--steps", "20", "--batch", "2",
                    "--out", str(tmp_path / "p.png"))
     assert curve[-1] < curve[0]
+
+
+def test_pendulum_apg_example_improves_the_return():
+    pytest.importorskip("jax")
+    curve = run("pendulum_apg", "--iters", "6", "--horizon", "20", "--batch", "4")
+    assert curve[-1] > curve[0]

@@ -6,7 +6,8 @@ the files). What differs is the integrator: gymnasium steps its ODE with explici
 or semi-implicit (Pendulum) Euler in generalized coordinates; ukemi takes one variational-
 integrator step of the rigid bodies in maximal coordinates with the joint as a constraint.
 Both are first-order accurate in the step, so trajectories agree to O(dt) over a fixed time
-(measured in tests/test_envs.py). Velocities in the observation are ukemi's midpoint
+(measured in tests/test_envs.py: for the pendulum, one step agrees to O(dt²·ω³) and 0.5 s of
+swinging to 0.005–0.28 in the observation at dt = 0.05, halving with dt). Velocities in the observation are ukemi's midpoint
 velocities ``(q_k − q_{k−1}) / h`` — for the pendulum exactly gymnasium's ``newthdot``.
 """
 
