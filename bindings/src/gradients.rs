@@ -406,13 +406,21 @@ pub fn env_step<'py>(
         let out = py
             .detach(|| {
                 flat::batched(std::slice::from_ref(&m), b, |mm, i| {
-                    flat::env_step(mm, &xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu], nstep)
+                    flat::env_step(
+                        mm,
+                        &xs[i * n..(i + 1) * n],
+                        &us[i * nu..(i + 1) * nu],
+                        nstep,
+                    )
                 })
             })
             .py()?;
         let x: Vec<f64> = out.iter().flat_map(|r| r.x.iter().copied()).collect();
         let status: Vec<u8> = out.iter().map(|r| r.status).collect();
-        let force: Vec<f64> = out.iter().flat_map(|r| r.forces.force_c.iter().copied()).collect();
+        let force: Vec<f64> = out
+            .iter()
+            .flat_map(|r| r.forces.force_c.iter().copied())
+            .collect();
         let wrench: Vec<f64> = out
             .iter()
             .flat_map(|r| r.forces.body_wrench.iter().copied())

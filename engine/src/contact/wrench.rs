@@ -87,7 +87,11 @@ mod tests {
         let cf = contact_forces(&model, &prev, &s);
         let weight = 9.81 * 2.0;
         let close = |a: f64, b: f64| (a - b).abs() < 1e-6 * weight;
-        assert!(close(cf.force_c[0], weight), "normal force {}", cf.force_c[0]);
+        assert!(
+            close(cf.force_c[0], weight),
+            "normal force {}",
+            cf.force_c[0]
+        );
         let w = &cf.body_wrench[6..12];
         let expected = [0.5 * weight, -weight, 0.0, 0.0, 0.0, weight];
         for (got, want) in w.iter().zip(expected) {
