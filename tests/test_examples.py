@@ -45,3 +45,24 @@ def test_torch_policy_example_lowers_the_cost(tmp_path):
     _, curve = run("torch_policy", "--iters", "4", "--steps", "20", "--batch", "2",
                    "--out", str(tmp_path / "p.png"))
     assert curve[-1] < curve[0]
+
+
+def test_pendulum_apg_example_improves_the_return():
+    pytest.importorskip("jax")
+    curve = run("pendulum_apg", "--iters", "6", "--horizon", "20", "--batch", "4")
+    assert curve[-1] > curve[0]
+
+
+def test_sb3_train_example_runs_ukemi_and_reference(tmp_path):
+    """Reduced run of examples/sb3_train.py (PPO and SAC, ukemi/Pendulum-v0 vs Pendulum-v1):
+    both runs train on the same budget and the PNG is written. Learning itself is asserted in
+    tests/test_envs.py::test_sb3_ppo_learns_inverted_pendulum."""
+    pytest.importorskip("stable_baselines3")
+    out = tmp_path / "curve.png"
+    runs = run("sb3_train", "--reduced", "--envs", "ukemi/Pendulum-v0", "--out", str(out))
+    assert out.exists()
+    for algo in ("PPO", "SAC"):
+        pair = runs["ukemi/Pendulum-v0", algo]
+        assert set(pair) == {"ukemi/Pendulum-v0", "Pendulum-v1"}
+        for steps, returns, final, _, _ in pair.values():
+            assert len(returns) >= 1 and np.all(returns < 0) and final < 0  # Pendulum costs

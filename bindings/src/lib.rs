@@ -28,6 +28,7 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gradients::flat_step_vjp, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_rollout, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_rollout_vjp, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::env_step, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_step_jacobians, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::get_num_threads, m)?)?;

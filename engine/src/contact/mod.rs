@@ -16,6 +16,7 @@
 //! restitution), as in the paper.
 pub mod cone;
 pub mod geometry;
+pub mod wrench;
 
 use nalgebra::{Matrix3, Vector3};
 

@@ -1,8 +1,11 @@
-"""gymnasium environments on ukemi physics, mirroring gymnasium's MuJoCo v5 tasks.
+"""gymnasium environments on ukemi physics, mirroring gymnasium's MuJoCo v5 and classic tasks.
 
-``import ukemi`` registers ``ukemi/InvertedPendulum-v0``, ``ukemi/InvertedDoublePendulum-v0``,
-``ukemi/Reacher-v0``, ``ukemi/Hopper-v0``, ``ukemi/Walker2d-v0``, ``ukemi/HalfCheetah-v0`` and
-``ukemi/Ant-v0`` (when gymnasium is installed)::
+``import ukemi`` registers (when gymnasium is installed) ``ukemi/Pendulum-v0`` and a continuous
+``ukemi/CartPole-v0`` (classic-control semantics, :mod:`ukemi.envs.classic`),
+``ukemi/InvertedPendulum-v0``, ``ukemi/InvertedDoublePendulum-v0``, ``ukemi/Reacher-v0``,
+``ukemi/Hopper-v0``, ``ukemi/Walker2d-v0``, ``ukemi/HalfCheetah-v0``, ``ukemi/Ant-v0`` and
+``ukemi/Humanoid-v0`` (MuJoCo v5 semantics), and ukemi's own ``ukemi/BoxPush-v0`` and
+``ukemi/Quadruped-v0``::
 
     import gymnasium, ukemi
     env = gymnasium.make("ukemi/Hopper-v0")                 # single env (TimeLimit 1000)
@@ -13,9 +16,11 @@ Each env uses the same MJCF asset, observation layout, action space, reward term
 rule, reset noise and ``frame_skip`` as the v5 env of the same name; the docstring of each
 class lists what differs (contact model, MuJoCo-only quantities such as ``cfrc_ext``). A step
 whose solve fails truncates the episode with ``info["solver_status"]``
-(:mod:`ukemi.envs.base`). Swimmer is not provided: it needs fluid forces (MJCF ``density`` and
-``viscosity``) that ukemi does not model, so it could not swim. Humanoid loads and runs but is
-slow (about 10 ms per engine step) and is not registered yet.
+(:mod:`ukemi.envs.base`); every step's ``info["contact_forces"]`` is the (ncontact, 3) contact
+force per candidate (impulse / time step, contact frame). Swimmer is not provided: it needs
+fluid forces (MJCF ``density`` and ``viscosity``) that ukemi does not model, so it could not
+swim. :mod:`ukemi.envs.differentiable` gives the tasks' dynamics and rewards as JAX or torch
+functions for analytic policy gradients.
 
 Names here load lazily, so ``import ukemi.envs`` stays cheap.
 """
@@ -31,7 +36,9 @@ _LAZY = {
     "InvertedPendulumEnv": "pendulums", "InvertedDoublePendulumEnv": "pendulums",
     "ReacherEnv": "reacher", "HopperEnv": "locomotion", "Walker2dEnv": "locomotion",
     "HalfCheetahEnv": "locomotion", "AntEnv": "ant", "UkemiVectorEnv": "vector",
-    "UkemiSB3VecEnv": "sb3",
+    "UkemiSB3VecEnv": "sb3", "PendulumEnv": "classic", "CartPoleEnv": "classic",
+    "HumanoidEnv": "humanoid", "BoxPushEnv": "push", "QuadrupedEnv": "quadruped",
+    "make_task": "differentiable",
 }
 
 __all__ = ["ENV_IDS", "register_envs", *_LAZY]

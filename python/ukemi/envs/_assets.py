@@ -14,8 +14,9 @@ import numpy as np
 from .._loaders import gymnasium_asset_path
 from .._ukemi import Model
 
-# The loader reports MuJoCo solver options it ignores; the env docstrings document them.
-_BENIGN = "ukemi's own integrator and interior-point solver are used"
+# The loader reports MuJoCo solver options (and humanoid.xml's passive tendons) it ignores; the
+# env docstrings document them.
+_BENIGN = ("ukemi's own integrator and interior-point solver are used", "passive tendon ignored")
 
 
 def asset_path(xml_file: str) -> Path:
@@ -30,7 +31,8 @@ def asset_path(xml_file: str) -> Path:
 def load_model(path: str, timestep: float | None, options: tuple[tuple[str, float], ...]) -> Model:
     """Load once per (file, options); ``Model`` is immutable, so envs share it."""
     with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=f".*{_BENIGN}.*")
+        for message in _BENIGN:
+            warnings.filterwarnings("ignore", message=f".*{message}.*")
         model = Model.from_xml_path(path)
     opts = dict(options)
     if timestep is not None:
@@ -42,12 +44,15 @@ def _vec(text: str | None, n: int, default: float = 0.0) -> np.ndarray:
     return np.array([float(s) for s in text.split()]) if text else np.full(n, default)
 
 
-_SEGMENT_TYPES = ("capsule", "cylinder", "sphere")
+_SEGMENT_TYPES = ("capsule", "cylinder", "sphere", "box")
 
 
 def _segment(geom: ET.Element) -> tuple[np.ndarray, np.ndarray, float] | None:
     """(local from, local to, radius) of a capsule, cylinder or sphere geom (renderer only)."""
     size = _vec(geom.get("size"), 1, 0.02)
+    if geom.get("type") == "box":  # drawn as a disk of its first half-size
+        centre = _vec(geom.get("pos"), 3)
+        return centre, centre, float(size[0])
     if geom.get("fromto"):
         ft = _vec(geom.get("fromto"), 6)
         return ft[:3], ft[3:], float(size[0])
@@ -70,6 +75,7 @@ class MjcfInfo:
     sites: dict[str, tuple[int, np.ndarray]] = field(default_factory=dict)  #: name -> (body, local pos)
     segments: list[tuple[int, np.ndarray, np.ndarray, float]] = field(default_factory=list)
     #: (body, local from, local to, radius) of capsule, cylinder and sphere geoms
+    actuator_joints: list[str] = field(default_factory=list)  #: joint of each actuator, in order
 
 
 @functools.lru_cache(maxsize=64)
@@ -91,6 +97,8 @@ def mjcf_info(path: str) -> MjcfInfo:
 
     for wb in root.iter("worldbody"):
         visit(wb, 0)
+    for act in root.iter("actuator"):
+        info.actuator_joints.extend(a.get("joint", "") for a in act)
     return info
 
 

@@ -9,22 +9,26 @@ warm start), which costs iterations, never accuracy.
 
 from __future__ import annotations
 
-import re
+from typing import NamedTuple
 
 import numpy as np
 
 from .. import _ukemi
-from ..errors import ConvergenceError
 
-_STATUS = re.compile(r"did not converge: (\w+)")
-
-
-def _status_of(error: ConvergenceError) -> str:
-    m = _STATUS.search(str(error))
-    return m.group(1) if m else "not_converged"
+#: solver status names by code (``ukemi.STATUS_NAMES``)
+STATUS = tuple(_ukemi.STATUS_NAMES)
 
 
-def simulate(model, xs: np.ndarray, ctrls: np.ndarray, frame_skip: int) -> tuple[np.ndarray, list[str]]:
+class Physics(NamedTuple):
+    """Result of :func:`simulate` for a batch of B states."""
+
+    x: np.ndarray  #: flat states after the env step (B, nq + nv); the input row where a solve failed
+    status: list[str]  #: solver status per row ("converged", "max_iterations", ...)
+    contact_force: np.ndarray  #: (B, ncontact, 3) last substep's force per contact candidate (N)
+    body_wrench: np.ndarray  #: (B, nbody, 6) contact wrench per body: torque about the origin, force
+
+
+def simulate(model, xs: np.ndarray, ctrls: np.ndarray, frame_skip: int) -> Physics:
     """Advance every row of ``xs`` by ``frame_skip`` steps under constant controls.
 
     Args:
@@ -34,24 +38,15 @@ def simulate(model, xs: np.ndarray, ctrls: np.ndarray, frame_skip: int) -> tuple
         frame_skip: Engine steps per env step.
 
     Returns:
-        (xs_next (B, nq + nv), status per row). A row whose solve failed at any substep (or
-        produced a non-finite state) keeps its input state and gets the solver's status name
-        (``"max_iterations"``, ``"line_search_failed"``, ``"non_finite"``); other rows get
-        ``"converged"``.
+        :class:`Physics`. A row whose solve failed at any substep (or produced a non-finite
+        state) keeps its input state, zero forces and the solver's status name
+        (``"max_iterations"``, ``"line_search_failed"``, ``"non_finite"``).
+
+    Contact forces are the last substep's impulses divided by the time step, in each
+    candidate's contact frame (normal, tangent 1, tangent 2) at the substep's initial
+    configuration; the body wrenches are the same forces summed per body in the world frame.
     """
     xs = np.ascontiguousarray(xs, dtype=np.float64)
-    us = np.ascontiguousarray(np.repeat(np.asarray(ctrls, np.float64)[:, None, :], frame_skip, axis=1))
-    try:
-        out = _ukemi._flat_rollout(model, xs, us, None)[:, -1]
-    except ConvergenceError as e:
-        if len(xs) == 1:
-            return xs.copy(), [_status_of(e)]
-        # One failed row fails the batch call: redo the rows one by one to find which.
-        rows = [simulate(model, xs[i : i + 1], ctrls[i : i + 1], frame_skip) for i in range(len(xs))]
-        return np.concatenate([r[0] for r in rows]), [r[1][0] for r in rows]
-    status = ["converged"] * len(xs)
-    finite = np.isfinite(out).all(axis=1)
-    if not finite.all():
-        out = np.where(finite[:, None], out, xs)
-        status = ["converged" if f else "non_finite" for f in finite]
-    return np.ascontiguousarray(out), status
+    us = np.ascontiguousarray(ctrls, dtype=np.float64)
+    x, codes, force, wrench = _ukemi._env_step(model, xs, us, int(frame_skip))
+    return Physics(x, [STATUS[c] for c in codes], force, wrench)

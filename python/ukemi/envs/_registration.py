@@ -8,8 +8,10 @@ from __future__ import annotations
 
 from typing import Any
 
-#: (name, entry point, max_episode_steps, reward_threshold), as gymnasium's MuJoCo v5 envs
+#: (name, entry point, max_episode_steps, reward_threshold), as gymnasium's envs of the same name
 ENVS: tuple[tuple[str, str, int, float | None], ...] = (
+    ("Pendulum", "ukemi.envs.classic:PendulumEnv", 200, None),
+    ("CartPole", "ukemi.envs.classic:CartPoleEnv", 500, 475.0),
     ("InvertedPendulum", "ukemi.envs.pendulums:InvertedPendulumEnv", 1000, 950.0),
     ("InvertedDoublePendulum", "ukemi.envs.pendulums:InvertedDoublePendulumEnv", 1000, 9100.0),
     ("Reacher", "ukemi.envs.reacher:ReacherEnv", 50, -3.75),
@@ -17,6 +19,9 @@ ENVS: tuple[tuple[str, str, int, float | None], ...] = (
     ("Walker2d", "ukemi.envs.locomotion:Walker2dEnv", 1000, None),
     ("HalfCheetah", "ukemi.envs.locomotion:HalfCheetahEnv", 1000, 4800.0),
     ("Ant", "ukemi.envs.ant:AntEnv", 1000, 6000.0),
+    ("Humanoid", "ukemi.envs.humanoid:HumanoidEnv", 1000, None),
+    ("BoxPush", "ukemi.envs.push:BoxPushEnv", 100, None),
+    ("Quadruped", "ukemi.envs.quadruped:QuadrupedEnv", 1000, None),
 )
 
 ENV_IDS: tuple[str, ...] = tuple(f"ukemi/{name}-v0" for name, *_ in ENVS)

@@ -13,6 +13,13 @@ Truncation, not termination, because the failure is the simulator's, not the tas
 bootstrapping from the last valid observation stays correct. Every step's ``info`` carries
 ``"solver_status"`` (``"converged"`` normally).
 
+Contact forces: every step's ``info["contact_forces"]`` is an (ncontact, 3) array, one row per
+contact candidate of the model (a fixed list, ``model.contact_pairs``; inactive candidates
+read ~0): the force of the env step's last engine step, ``contact_impulse / timestep`` (N),
+in the candidate's contact frame (normal, tangent 1, tangent 2) — the normal component is
+>= 0 and the tangential part lies in the friction cone. Models without contacts give (0, 3).
+A failed step reports zeros. ``body_contact_wrench`` holds the same forces summed per body.
+
 Joint limits: ukemi's joint limits are hard (an inequality in the solve), MuJoCo's are soft
 (a spring-damper that lets a joint sit beyond its range and pushes it back over several
 steps). gymnasium's reset noise puts joints beyond their ranges (Hopper's and Walker2d's knees
@@ -94,6 +101,7 @@ class UkemiMujocoEnv(gymnasium.Env):
         self.init_qvel = np.zeros(self.model.nv)
         self._x = np.concatenate([self.init_qpos, self.init_qvel])
         self._state = None
+        self._clear_contacts()
         low, high = np.asarray(self.model.actuator_ctrlrange, dtype=np.float32).T
         self.action_space = spaces.Box(low=low, high=high, dtype=np.float32)
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": int(np.round(1.0 / self.dt))}
@@ -132,6 +140,22 @@ class UkemiMujocoEnv(gymnasium.Env):
                              f"got {qpos.shape} and {qvel.shape}")
         self._set_x(np.concatenate([qpos, qvel]))
 
+    def _clear_contacts(self) -> None:
+        self._contact_force = np.zeros((self.model.ncontact, 3))
+        self._body_wrench = np.zeros((self.model.nbody, 6))
+
+    @property
+    def contact_forces(self) -> np.ndarray:
+        """Last env step's force per contact candidate, contact frame (normal, t1, t2), N;
+        (ncontact, 3). Zero after a reset."""
+        return self._contact_force.copy()
+
+    @property
+    def body_contact_wrench(self) -> np.ndarray:
+        """Last env step's external contact wrench on each body, world frame: torque about the
+        world origin (N·m) then force (N); (nbody, 6), world row zero. Zero after a reset."""
+        return self._body_wrench.copy()
+
     def _set_x(self, x: np.ndarray) -> None:
         self._x = np.array(x, dtype=np.float64)
         self._state = None
@@ -158,6 +182,7 @@ class UkemiMujocoEnv(gymnasium.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         self._set_x(np.concatenate([self.init_qpos, self.init_qvel]))
+        self._clear_contacts()
         self._reset_model()
         if self.clip_reset_to_joint_limits:
             self._set_x(np.concatenate([self._clip_to_joint_limits(self.qpos), self.qvel]))
@@ -166,8 +191,8 @@ class UkemiMujocoEnv(gymnasium.Env):
     def step(self, action):
         action = self._check_action(action)
         before = self._snapshot()
-        x_next, status = simulate(self.model, self._x[None], action[None], self.frame_skip)
-        return self._after_physics(action, before, x_next[0], status[0])
+        phys = simulate(self.model, self._x[None], self._ctrl(action)[None], self.frame_skip)
+        return self._after_physics(action, before, *(p[0] for p in phys))
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -187,20 +212,30 @@ class UkemiMujocoEnv(gymnasium.Env):
     # -- pieces shared with the vector env --------------------------------------------------
     def _check_action(self, action) -> np.ndarray:
         a = np.asarray(action, dtype=np.float64)
-        if a.shape != (self.model.nu,):
-            raise ValueError(f"Action dimension mismatch. Expected {(self.model.nu,)}, found {a.shape}")
+        shape = self.action_space.shape
+        if a.shape != shape:
+            raise ValueError(f"Action dimension mismatch. Expected {shape}, found {a.shape}")
         return a
 
-    def _after_physics(self, action: np.ndarray, before: Any, x_next: np.ndarray, status: str):
+    def _ctrl(self, action: np.ndarray) -> np.ndarray:
+        """Engine controls (nu,) for a checked action (default: the action itself)."""
+        return action
+
+    def _after_physics(self, action: np.ndarray, before: Any, x_next: np.ndarray, status: str,
+                       contact_force: np.ndarray, body_wrench: np.ndarray):
         if status != "converged":
             if self.warn_on_solver_failure:
                 warnings.warn(f"{type(self).__name__}: the solve failed ({status}) at t-step of "
                               f"{self.dt:g} s; episode truncated at the last converged state",
                               SolverFailureWarning, stacklevel=3)
-            return self._get_obs(), 0.0, False, True, {"solver_status": status}
+            self._clear_contacts()
+            return self._get_obs(), 0.0, False, True, {"solver_status": status,
+                                                       "contact_forces": self.contact_forces}
         self._set_x(x_next)
+        self._contact_force, self._body_wrench = contact_force, body_wrench
         reward, terminated, info = self._reward(before, action)
         info["solver_status"] = status
+        info["contact_forces"] = self.contact_forces
         return self._get_obs(), float(reward), bool(terminated), False, info
 
     # -- task hooks -------------------------------------------------------------------------

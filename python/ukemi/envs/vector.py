@@ -57,10 +57,12 @@ class BatchedEnvs:
         acts = [e._check_action(a) for e, a in zip(envs, actions, strict=True)]
         befores = [e._snapshot() for e in envs]
         xs = np.stack([e._x for e in envs])
-        x_next, status = simulate(self.model, xs, np.stack(acts), self.frame_skip)
+        ctrls = np.stack([e._ctrl(a) for e, a in zip(envs, acts, strict=True)])
+        phys = simulate(self.model, xs, ctrls, self.frame_skip)
         out = []
         for k, i in enumerate(rows):
-            obs, rew, term, trunc, info = envs[k]._after_physics(acts[k], befores[k], x_next[k], status[k])
+            obs, rew, term, trunc, info = envs[k]._after_physics(acts[k], befores[k],
+                                                                 *(p[k] for p in phys))
             self.elapsed[i] += 1
             if self.max_episode_steps is not None and self.elapsed[i] >= self.max_episode_steps:
                 trunc = True
