@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import re
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -274,9 +273,3 @@ def _plot_fig7(plt, rows: list[dict], out: Path) -> Path:
     plt.close(fig)
     return p
 
-
-def copy_headline_plots(pngs: list[Path], docs: Path) -> None:
-    """Copy the README's headline plots into ``docs``."""
-    for p in pngs:
-        if p.name in ("accuracy_sliding_box.png", "kappa_grad.png", "accuracy_humanoid_fig7.png"):
-            shutil.copy(p, docs / p.name)
