@@ -1,10 +1,11 @@
-"""``ukemi`` command line: ``ukemi bench accuracy [--quick] [--out results/]``."""
+"""``ukemi`` command line: ``ukemi bench accuracy [--quick] [--out results/] ...``."""
 
 from __future__ import annotations
 
 import sys
 
-USAGE = "usage: ukemi bench accuracy [--quick] [--out DIR]"
+USAGE = ("usage: ukemi bench accuracy [--quick] [--out DIR] [--sections LIST] "
+         "[--update-benchmarks FILE]")
 
 
 def main(argv: list[str] | None = None) -> int:

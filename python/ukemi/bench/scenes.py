@@ -6,8 +6,10 @@ Every function returns plain numbers per setting (no plotting, no printing) so t
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -80,10 +82,36 @@ def run_slide(engine: str, variant: str, dt: float, tol: float | None, duration:
 
 
 # ----------------------------------------------------------------------------- humanoid drop
+def shared_models_dir() -> Path | None:
+    """The project's shared robot models: $UKEMI_MODELS_DIR, else ../shared/models next to the
+    repository this package was imported from; None if neither exists."""
+    env = os.environ.get("UKEMI_MODELS_DIR")
+    candidates = [Path(env)] if env else []
+    candidates.append(Path(__file__).resolve().parents[3].parent / "shared" / "models")
+    return next((c for c in candidates if c.is_dir()), None)
+
+
+def humanoid_files() -> list[tuple[str, Path]]:
+    """(label, MJCF path) of the humanoids to drop: gymnasium's, and the shared humanoid.xml."""
+    out = [("gymnasium", Path(ukemi.gymnasium_asset_path("humanoid")))]
+    shared = shared_models_dir()
+    if shared is not None and (shared / "humanoid.xml").exists():
+        out.append(("shared humanoid.xml", shared / "humanoid.xml"))
+    return out
+
+
+def load_humanoid(path: Path):
+    """(ukemi model, None) or (None, the loader's reason) when ukemi cannot simulate it yet."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # fluid/solver options the engine ignores
+            return ukemi.Model.from_xml_path(str(path)), None
+    except (ukemi.UkemiError, OSError) as e:
+        return None, f"{type(e).__name__}: {str(e).splitlines()[0]}"
+
+
 def _humanoid_ukemi():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # fluid/solver options the engine ignores
-        return ukemi.Model.from_xml_path(ukemi.gymnasium_asset_path("humanoid"))
+    return load_humanoid(humanoid_files()[0][1])[0]
 
 
 def humanoid_qpos0(m0) -> np.ndarray:
@@ -102,7 +130,7 @@ def _drop_metrics(t: np.ndarray, least: np.ndarray, torso_z: np.ndarray, land: f
 
 
 def run_humanoid(engine: str, variant: str, dt: float, tol: float | None, duration: float,
-                 base=None) -> dict:
+                 base=None, path: Path | None = None) -> dict:
     n = int(round(duration / dt))
     if engine == "ukemi":
         m = base.with_options(timestep=dt)
@@ -117,22 +145,29 @@ def run_humanoid(engine: str, variant: str, dt: float, tol: float | None, durati
         least = np.array([ukemi.signed_distances(m, m.make_state(qpos=qp))[floor].min()
                           for qp in tr.qpos])
         out = _drop_metrics(tr.time, least, tr.body_pos[:, torso, 2], 0.5 * duration)
+        out["fail_t"] = tr.time[:-1][tr.status != "converged"]
         return {**out, **_solver_stats(tr), "wall": wall, "sim": n * dt}
     mj = _mujoco()
-    m = mj.MjModel.from_xml_path(str(ukemi.gymnasium_asset_path("humanoid")))
+    m = mj.MjModel.from_xml_path(str(path or ukemi.gymnasium_asset_path("humanoid")))
     m.opt.timestep, m.opt.cone = dt, _mj_cone(mj, variant)
     q = humanoid_qpos0(base)
     d = mj.MjData(m)
     d.qpos[:] = q
     torso = mj.mj_name2id(m, mj.mjtObj.mjOBJ_BODY, "torso")
     floor = mj.mj_name2id(m, mj.mjtObj.mjOBJ_GEOM, "floor")
-    ts, least, tz = [], [], []
-    for _ in range(n):
+    ts, least, tz, diverged = [], [], [], None
+    for k in range(n):
         mj.mj_step(m, d)  # contacts of the state the step started from
+        if d.warning[mj.mjtWarning.mjWARN_BADQACC].number:
+            diverged = k * dt  # MuJoCo resets the data after a bad acceleration: stop here
+            break
         ts.append(d.time - dt)
         least.append(_mj_least(d, floor=floor))
         tz.append(d.xpos[torso, 2])
-    out = _drop_metrics(np.array(ts), np.array(least), np.array(tz), 0.5 * duration)
+    out = _drop_metrics(np.array(ts), np.array(least), np.array(tz), 0.5 * duration) if ts \
+        else {"min_dist_landing_m": float("nan"), "min_dist_rest_m": float("nan"),
+              "torso_z_end_m": float("nan"), "torso_t": np.zeros(0), "torso_z": np.zeros(0)}
+    out["diverged_t"] = diverged
     return {**out, **_mj_timing(mj, m, lambda dd: dd.qpos.__setitem__(slice(None), q), n),
             "sim": n * dt}
 
