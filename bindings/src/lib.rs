@@ -18,6 +18,7 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<step::PyStepInfo>()?;
     m.add_function(wrap_pyfunction!(step::step, m)?)?;
     m.add_function(wrap_pyfunction!(step::solver_trace, m)?)?;
+    m.add_function(wrap_pyfunction!(step::step_smoothed, m)?)?;
     m.add_function(wrap_pyfunction!(step::rollout, m)?)?;
     m.add_function(wrap_pyfunction!(step::signed_distances, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::step_jacobians, m)?)?;

@@ -290,3 +290,32 @@ pub fn solver_trace<'py>(
         ))
     })
 }
+
+/// The smoothed step: the hard step moved to the central path at `kappa` (the map whose
+/// derivatives `kappa_grad = kappa` gives). Returns `(next_state, info)`; `info` reports the
+/// central-path solve.
+#[pyfunction]
+#[pyo3(name = "_step_smoothed")]
+pub fn step_smoothed(
+    py: Python<'_>,
+    model: &PyModel,
+    state: &PyState,
+    ctrl: PyReadonlyArray1<'_, f64>,
+    kappa: f64,
+) -> PyResult<(PyState, PyStepInfo)> {
+    guard(|| {
+        same_model(model, state)?;
+        let ctrl = ctrl.as_slice()?.to_vec();
+        let m = model.inner.clone();
+        let mut next = state.inner.clone();
+        let report = py.detach(|| ukemi_engine::step_smoothed(&m, &mut next, &ctrl, kappa));
+        let report = report.py()?;
+        Ok((
+            PyState {
+                model: model.inner.clone(),
+                inner: next,
+            },
+            report.into(),
+        ))
+    })
+}

@@ -20,7 +20,8 @@ from . import _ukemi, models
 from ._builder import JOINT_KINDS, ModelBuilder
 from ._loaders import gymnasium_asset_path, load
 from ._gradients import StepJacobians, rollout_vjp, step_jacobians, step_jvp, step_vjp
-from ._simulate import STATUS_NAMES, Trajectory, rollout, signed_distances, solver_trace, step
+from ._simulate import (STATUS_NAMES, Trajectory, rollout, signed_distances, solver_trace, step,
+                        step_smoothed)
 from ._ukemi import Model, State, StepInfo, get_num_threads, set_num_threads
 from .errors import (
     ConvergenceError,
@@ -66,6 +67,7 @@ __all__ = [
     "signed_distances",
     "step",
     "solver_trace",
+    "step_smoothed",
     "step_jacobians",
     "step_jvp",
     "step_vjp",

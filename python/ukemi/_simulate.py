@@ -60,6 +60,29 @@ def step(model, state, ctrl=None, *, qfrc_applied=None, xfrc_applied=None, on_fa
     return next_state, info
 
 
+def step_smoothed(model, state, ctrl=None, *, kappa):
+    """The smoothed step: the next state on the central path at ``kappa`` (every contact and
+    limit pair at ``b ∘ c = kappa e``), the map whose derivatives ``kappa_grad=kappa`` gives.
+
+    Args:
+        model, state, ctrl: as for :func:`step`.
+        kappa: central-path parameter, > 0.
+
+    Returns:
+        (next_state, info): ``info`` reports the central-path solve.
+
+    Raises:
+        ValueError: ``kappa`` not finite and > 0.
+        ConvergenceError: the hard step or the central-path solve failed.
+    """
+    _check_types(model, state)
+    kappa = float(kappa)
+    if not (np.isfinite(kappa) and kappa > 0):
+        raise ValueError(f"kappa must be finite and > 0, got {kappa}")
+    ctrl = np.zeros(model.nu) if ctrl is None else as_float_array("ctrl", ctrl, (model.nu,))
+    return _ukemi._step_smoothed(model, state, ctrl, kappa)
+
+
 def solver_trace(model, state, ctrl=None, *, condition=False):
     """Take one step and record every interior-point iteration (convergence studies, debugging).
 

@@ -10,10 +10,8 @@ For each κ in 1e-2 … 1e-8 and None (the exact derivative of the hard step), o
 Errors are Frobenius norms relative to the largest finite-difference Jacobian of the scene:
 against central differences of the hard step at points away from kinks (a point counts as a
 kink when its forward and backward differences disagree), and against central differences of
-the smoothed step at the same κ. The smoothed step (the engine's ``step_smoothed``, not exposed
-to Python) is reproduced by the interior-point solve itself: started from the neutral point
-with its centring floored at κ and its stopping test out of reach, it runs to the central-path
-point at κ and stops when the line search can make no further progress.
+the smoothed step at the same κ (``ukemi.step_smoothed``: the hard step moved to the central
+path at κ, the map whose derivative ``kappa_grad = κ`` returns).
 """
 
 from __future__ import annotations
@@ -30,7 +28,6 @@ PUSH_MU, PUSH_MASS, G = 0.5, 1.0, 9.81
 PUSH_KINK = PUSH_MU * PUSH_MASS * G  # N
 EPS = 1e-6  # finite-difference step (N, m, rad, m/s, ctrl units)
 KINK_TOL = 1e-4  # |forward − backward difference| / scale that marks a kink
-SOLVED_TOL = 1e-10  # equality residual the reproduced smoothed step must reach
 
 
 def box_push_model():
@@ -50,14 +47,6 @@ def hopper_model():
     return m.with_options(timestep=0.01, rtol=1e-13, warm_start=False)
 
 
-def smoothed_model(model, kappa: float):
-    """The model whose step lands on the central path at ``kappa`` (see the module notes):
-    centring floor kappa_tol / undercut = kappa, stopping test kappa_tol = 1e-6 kappa."""
-    return model.with_options(kappa_tol=1e-6 * kappa, undercut=1e-6, max_iter=100,
-                              warm_start=False)
-
-
-# ----------------------------------------------------------------------------- state tangents
 def _quat_mul(a, b):
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
@@ -122,16 +111,23 @@ class Point:
         self.with_state = with_state
         self.ny = 2 * model.nv
 
-    def _next(self, model, d: np.ndarray, du: np.ndarray):
-        """Next state's tangent from the base next state, and whether the solve was good."""
+    def _next(self, model, d: np.ndarray, du: np.ndarray, kappa):
+        """Next state (hard, or smoothed at ``kappa``) and whether its solve converged."""
         s = perturb(model, self.state, d) if d.any() else self.state
-        nxt, info = ukemi.step(model, s, self.ctrl + du, on_failure="return")
-        good = info.status == "converged" or info.residual < SOLVED_TOL
-        return nxt, good
+        if kappa is None:
+            nxt, info = ukemi.step(model, s, self.ctrl + du, on_failure="return")
+            return nxt, info.status == "converged"
+        try:
+            return ukemi.step_smoothed(model, s, self.ctrl + du, kappa=kappa)[0], True
+        except ukemi.ConvergenceError:
+            return None, False
 
-    def fd(self, model):
-        """Central, forward and backward differences of ``model``'s step: (J, J+, J−, ok)."""
-        base, ok = self._next(model, np.zeros(self.ny), np.zeros(self.model.nu))
+    def fd(self, model, kappa=None):
+        """Central, forward and backward differences of ``model``'s step (smoothed at
+        ``kappa``): (J, J+, J−, ok)."""
+        base, ok = self._next(model, np.zeros(self.ny), np.zeros(self.model.nu), kappa)
+        if base is None:
+            return None, None, None, False
         ncol = (self.ny if self.with_state else 0) + self.model.nu
         jp, jm = np.zeros((self.ny, ncol)), np.zeros((self.ny, ncol))
         for i in range(ncol):
@@ -140,9 +136,11 @@ class Point:
                 d[i] = EPS
             else:
                 du[i - (self.ny if self.with_state else 0)] = EPS
-            plus, ok_p = self._next(model, d, du)
-            minus, ok_m = self._next(model, -d, -du)
+            plus, ok_p = self._next(model, d, du, kappa)
+            minus, ok_m = self._next(model, -d, -du, kappa)
             ok = ok and ok_p and ok_m
+            if kappa is not None and not ok:
+                return None, None, None, False
             jp[:, i] = difference(self.model, base, plus) / EPS
             jm[:, i] = -difference(self.model, base, minus) / EPS
         return 0.5 * (jp + jm), jp, jm, ok
@@ -199,7 +197,7 @@ def sweep_scene(scene: str, points: list[Point], kappas=KAPPAS, log=print) -> li
                 e_hard.append(np.linalg.norm(J - h[0]) / scale)
             if kappa is None:  # the smoothed step is the hard one: compared above
                 continue
-            Js, _, _, ok = p.fd(smoothed_model(p.model, kappa))
+            Js, _, _, ok = p.fd(p.model, kappa)
             if ok:
                 e_smooth.append(np.linalg.norm(J - Js) / scale)
             else:
