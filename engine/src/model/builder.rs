@@ -102,6 +102,10 @@ pub struct JointSpec {
     pub qpos_ref: Vec<f64>,
     /// Rotor inertia (MuJoCo's `armature`): one value for every free dof, or one per dof.
     pub armature: Vec<f64>,
+    /// Hinges about different anchors (MuJoCo's sequential joints): `p_{i+1} - p_i` for each
+    /// consecutive pair of the `rot_axes` hinges, child body frame (m). `child_anchor` (and
+    /// `parent_anchor`) are the first hinge's anchor. Empty: all hinges turn about one point.
+    pub hinge_offsets: Vec<Vector3<f64>>,
 }
 
 impl JointSpec {
@@ -124,6 +128,7 @@ impl JointSpec {
             rot_axes: vec![],
             qpos_ref: vec![],
             armature: vec![],
+            hinge_offsets: vec![],
         }
     }
     /// Axis in the child body frame.
@@ -768,7 +773,8 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         parent,
         child,
         parent_anchor: pa - pb.com,
-        child_anchor: ca - cb.com,
+        // with offset hinges the child side is anchored at the last hinge (joints::offsets)
+        child_anchor: ca + spec.hinge_offsets.iter().sum::<Vector3<f64>>() - cb.com,
         offset,
         trans_basis,
         trans_dual,
@@ -785,6 +791,7 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         } else {
             broadcast(&spec.armature, nfree, &f("armature"))?
         },
+        hinge_offsets: hinge_offsets(spec)?,
         qpos_adr: 0,
         qvel_adr: 0,
     };
@@ -842,6 +849,28 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         )
     );
     Ok(joint)
+}
+
+/// Validated hinge offsets: one per consecutive pair of explicit hinge axes, finite; all-zero
+/// offsets are dropped (one common anchor).
+fn hinge_offsets(spec: &JointSpec) -> Result<Vec<Vector3<f64>>> {
+    let field = format!("joint[{}].hinge_offsets", spec.name);
+    if spec.hinge_offsets.iter().all(|d| d.norm() == 0.0) {
+        return Ok(vec![]);
+    }
+    for d in &spec.hinge_offsets {
+        check_finite(d.as_slice(), &field)?;
+    }
+    let n = spec.rot_axes.len();
+    ensure!(
+        n >= 2 && spec.hinge_offsets.len() == n - 1,
+        Error::model(
+            &field,
+            spec.hinge_offsets.len(),
+            format!("need one offset per consecutive pair of the {n} explicit hinge axes (rot_axes)")
+        )
+    );
+    Ok(spec.hinge_offsets.clone())
 }
 
 /// Limits on every free dof (one `(lower, upper)` pair each); ball rotations cannot be limited.
