@@ -6,6 +6,7 @@
 //! the free directions are the joint's minimal coordinates (`qpos`, `qvel`), on which springs,
 //! dampers and inputs act. The sixteen combinations are the [`JointKind`] variants.
 pub mod coordinates;
+pub mod coupling;
 pub mod geometry;
 pub mod hinges;
 mod kind;

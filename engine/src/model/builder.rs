@@ -1,6 +1,7 @@
 //! Model construction and validation: [`ModelBuilder::compile`] is the only way to a [`Model`].
 use nalgebra::{Matrix3, Vector3};
 
+use super::transmission::{CouplingSpec, TransmissionSpec, compile_couplings, compile_transmission};
 use super::{Actuator, Body, Model, Options, Topology};
 use crate::contact::geometry::{self, Shape};
 use crate::contact::{Contact, ContactModel, Geom};
@@ -184,6 +185,10 @@ pub struct ActuatorSpec {
     pub gain: f64,
     /// Bias terms: constant, per unit of actuator length `gear·q`, per unit of its rate.
     pub bias: [f64; 3],
+    /// Clamp of the scalar actuator force (MuJoCo's `forcerange`), if any.
+    pub forcerange: Option<(f64, f64)>,
+    /// Where the force acts (default: `joint`'s dof `dof`).
+    pub transmission: TransmissionSpec,
 }
 
 impl ActuatorSpec {
@@ -197,6 +202,8 @@ impl ActuatorSpec {
             ctrlrange: None,
             gain: 1.0,
             bias: [0.0; 3],
+            forcerange: None,
+            transmission: TransmissionSpec::Joint,
         }
     }
 }
@@ -273,6 +280,7 @@ pub struct ModelBuilder {
     excludes: Vec<(String, String)>,
     geom_excludes: Vec<(String, String)>,
     condim_max: bool,
+    couplings: Vec<CouplingSpec>,
 }
 
 impl ModelBuilder {
@@ -316,6 +324,10 @@ impl ModelBuilder {
     /// Add an actuator.
     pub fn add_actuator(&mut self, a: ActuatorSpec) {
         self.actuators.push(a);
+    }
+    /// Add a joint coupling (MuJoCo's `equality/joint`).
+    pub fn add_coupling(&mut self, c: CouplingSpec) {
+        self.couplings.push(c);
     }
     /// Add a collision geometry (fluent).
     pub fn geom(mut self, g: GeomSpec) -> Self {
@@ -364,9 +376,17 @@ impl ModelBuilder {
         assign_addresses(&mut joints);
         let geoms = self.compile_geoms(&names, &bodies)?;
         let contacts = self.compile_pairs(&geoms, &joints, &names)?;
-        let topology = Topology::new(bodies.len(), &joints, &parent_joint, &geoms, &contacts)
-            .map_err(|e| Error::model("joints", "graph", e))?;
-        let actuators = self.compile_actuators(&joints)?;
+        let couplings = compile_couplings(&self.couplings, &joints)?;
+        let topology = Topology::new(
+            bodies.len(),
+            &joints,
+            &parent_joint,
+            &geoms,
+            &contacts,
+            &couplings,
+        )
+        .map_err(|e| Error::model("joints", "graph", e))?;
+        let actuators = self.compile_actuators(&joints, &bodies)?;
         let nq = joints.iter().filter(|j| !j.is_loop).map(Joint::nq).sum();
         let nv = joints.iter().filter(|j| !j.is_loop).map(Joint::nfree).sum();
         let mut model = Model {
@@ -374,6 +394,7 @@ impl ModelBuilder {
             bodies,
             joints,
             actuators,
+            couplings,
             geoms,
             contacts,
             nq,
@@ -556,7 +577,7 @@ impl ModelBuilder {
         Ok(out)
     }
 
-    fn compile_actuators(&self, joints: &[Joint]) -> Result<Vec<Actuator>> {
+    fn compile_actuators(&self, joints: &[Joint], bodies: &[Body]) -> Result<Vec<Actuator>> {
         let mut out: Vec<Actuator> = Vec::new();
         for spec in &self.actuators {
             let f = |field: &str| format!("actuator[{}].{field}", spec.name);
@@ -564,15 +585,7 @@ impl ModelBuilder {
                 !out.iter().any(|a| a.name == spec.name),
                 Error::model(f("name"), &spec.name, "duplicate actuator name")
             );
-            let joint = joints
-                .iter()
-                .position(|j| j.name == spec.joint)
-                .ok_or_else(|| Error::model(f("joint"), &spec.joint, "unknown joint"))?;
-            let nfree = joints[joint].nfree();
-            ensure!(
-                spec.dof < nfree,
-                Error::model(f("dof"), spec.dof, format!("joint has {nfree} free dofs"))
-            );
+            let transmission = compile_transmission(spec, joints, bodies, &f)?;
             ensure!(
                 spec.gear.is_finite(),
                 Error::model(f("gear"), spec.gear, "must be finite")
@@ -587,12 +600,18 @@ impl ModelBuilder {
                     Error::model(f("ctrlrange"), (lo, hi), "need finite lower < upper")
                 );
             }
+            if let Some((lo, hi)) = spec.forcerange {
+                ensure!(
+                    !lo.is_nan() && !hi.is_nan() && lo <= hi,
+                    Error::model(f("forcerange"), (lo, hi), "need lower <= upper")
+                );
+            }
             out.push(Actuator {
                 name: spec.name.clone(),
-                joint,
-                dof: spec.dof,
+                transmission,
                 gear: spec.gear,
                 ctrlrange: spec.ctrlrange,
+                forcerange: spec.forcerange,
                 gain: spec.gain,
                 bias: spec.bias,
             });
