@@ -133,7 +133,8 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
         let free = j.trans_basis.columns(0, j.ntrans);
         let delta = free * nalgebra::DVector::from_column_slice(&q[..j.ntrans]);
         // hinges about offset anchors displace the child anchor by g(θ) (joints::offsets)
-        let (g, dg_dtheta) = offsets::displacement_at_angles(&j.rot, &j.hinge_offsets, &q[j.ntrans..]);
+        let (g, dg_dtheta) =
+            offsets::displacement_at_angles(&j.rot, &j.hinge_offsets, &q[j.ntrans..]);
         let delta = Vector3::new(delta[0], delta[1], delta[2]) + g;
         let a_p = parent.pos + rot_p * j.parent_anchor;
         let a_c = a_p + rot_pj * delta;

@@ -30,7 +30,13 @@ pub(super) fn read_actuators<'a, 'i>(
             .attribute("name")
             .map_or_else(|| format!("actuator{i}"), str::to_string);
         ctx.lines.insert(format!("actuator[{name}]"), ctx.line(a));
-        for t in ["body", "jointinparent", "cranksite", "slidersite", "refsite"] {
+        for t in [
+            "body",
+            "jointinparent",
+            "cranksite",
+            "slidersite",
+            "refsite",
+        ] {
             if a.attribute(t).is_some() {
                 return Err(ctx.unsupported(
                     a,
@@ -58,7 +64,8 @@ pub(super) fn read_actuators<'a, 'i>(
         let ctrlrange = range(ctx, "ctrlrange", "ctrllimited")?;
         let forcerange = range(ctx, "forcerange", "forcelimited")?;
         let (gain, bias) = gain_bias(ctx, a, &class, tag)?;
-        if matches!(transmission, TransmissionSpec::Site { .. }) && (bias[1] != 0.0 || bias[2] != 0.0)
+        if matches!(transmission, TransmissionSpec::Site { .. })
+            && (bias[1] != 0.0 || bias[2] != 0.0)
         {
             return Err(ctx.unsupported(
                 a,
@@ -87,7 +94,10 @@ fn transmission<'a, 'i>(
 ) -> Result<(String, usize, TransmissionSpec)> {
     if let Some(t) = a.attribute("tendon") {
         let terms = tendons.get(t).ok_or_else(|| {
-            ctx.err(a, format!("attribute `tendon` = {t:?}: unknown fixed tendon"))
+            ctx.err(
+                a,
+                format!("attribute `tendon` = {t:?}: unknown fixed tendon"),
+            )
         })?;
         return Ok((String::new(), 0, TransmissionSpec::Tendon(terms.clone())));
     }
@@ -99,7 +109,9 @@ fn transmission<'a, 'i>(
             .ok_or_else(|| ctx.err(a, format!("attribute `site` = {s:?}: unknown site")))?;
         let engine = tree.bodies[*body].engine;
         if engine == 0 {
-            return Err(ctx.unsupported(a, format!("actuator {name:?}: site {s:?} on a static body")));
+            return Err(
+                ctx.unsupported(a, format!("actuator {name:?}: site {s:?} on a static body"))
+            );
         }
         let on_body = tree.engine_bodies[engine]
             .1
@@ -114,9 +126,12 @@ fn transmission<'a, 'i>(
         };
         return Ok((String::new(), 0, spec));
     }
-    let joint = a
-        .attribute("joint")
-        .ok_or_else(|| ctx.err(a, format!("actuator {name:?} needs a `joint`, `tendon` or `site`")))?;
+    let joint = a.attribute("joint").ok_or_else(|| {
+        ctx.err(
+            a,
+            format!("actuator {name:?} needs a `joint`, `tendon` or `site`"),
+        )
+    })?;
     let map = tree
         .joints
         .iter()
@@ -173,7 +188,11 @@ pub(super) fn read_tendons<'a, 'i>(
                 if map.kind != "hinge" && map.kind != "slide" {
                     return Err(ctx.unsupported(j, format!("fixed tendon on a {} joint", map.kind)));
                 }
-                terms.push((map.engine_joint.clone(), map.dof, ctx.num(j, "", "coef", 0.0)?));
+                terms.push((
+                    map.engine_joint.clone(),
+                    map.dof,
+                    ctx.num(j, "", "coef", 0.0)?,
+                ));
             }
             out.insert(name, terms);
         }
@@ -394,7 +413,10 @@ fn read_joint_coupling<'a, 'i>(
         if map.kind != "hinge" && map.kind != "slide" {
             return Err(ctx.unsupported(
                 e,
-                format!("equality <joint> on {} joint {n:?} (hinge and slide only)", map.kind),
+                format!(
+                    "equality <joint> on {} joint {n:?} (hinge and slide only)",
+                    map.kind
+                ),
             ));
         }
         Ok(Some((map.engine_joint.clone(), map.dof)))

@@ -1,7 +1,9 @@
 //! Model construction and validation: [`ModelBuilder::compile`] is the only way to a [`Model`].
 use nalgebra::{Matrix3, Vector3};
 
-use super::transmission::{CouplingSpec, TransmissionSpec, compile_couplings, compile_transmission};
+use super::transmission::{
+    CouplingSpec, TransmissionSpec, compile_couplings, compile_transmission,
+};
 use super::{Actuator, Body, Model, Options, Topology};
 use crate::contact::geometry::{self, Shape};
 use crate::contact::{Contact, ContactModel, Geom};
@@ -886,7 +888,9 @@ fn hinge_offsets(spec: &JointSpec) -> Result<Vec<Vector3<f64>>> {
         Error::model(
             &field,
             spec.hinge_offsets.len(),
-            format!("need one offset per consecutive pair of the {n} explicit hinge axes (rot_axes)")
+            format!(
+                "need one offset per consecutive pair of the {n} explicit hinge axes (rot_axes)"
+            )
         )
     );
     Ok(spec.hinge_offsets.clone())

@@ -7,10 +7,10 @@ mod topology;
 mod transmission;
 
 pub use builder::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, ModelBuilder};
-pub use transmission::{CouplingSpec, Transmission, TransmissionSpec};
 pub use options::Options;
 pub(crate) use topology::Topology;
 pub(crate) use topology::body_node as topology_body_node;
+pub use transmission::{CouplingSpec, Transmission, TransmissionSpec};
 
 use nalgebra::{Matrix3, Vector3};
 

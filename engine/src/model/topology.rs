@@ -131,7 +131,11 @@ impl Topology {
         }
         let mut edges = Vec::new();
         for (c, bodies) in coupling_bodies.iter().enumerate() {
-            edges.extend(bodies.iter().filter_map(|&b| Some((coupling_node[c], body_node(b)?))));
+            edges.extend(
+                bodies
+                    .iter()
+                    .filter_map(|&b| Some((coupling_node[c], body_node(b)?))),
+            );
         }
         for (j, joint) in joints.iter().enumerate() {
             if let Some(n) = limit_node[j] {

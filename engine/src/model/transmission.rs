@@ -129,7 +129,11 @@ pub(super) fn compile_transmission(
             let nfree = joints[joint].nfree();
             ensure!(
                 spec.dof < nfree,
-                Error::model(field("dof"), spec.dof, format!("joint has {nfree} free dofs"))
+                Error::model(
+                    field("dof"),
+                    spec.dof,
+                    format!("joint has {nfree} free dofs")
+                )
             );
             Transmission::Joint {
                 joint,
@@ -164,7 +168,10 @@ pub(super) fn compile_transmission(
                 .filter(|&b| b > 0)
                 .ok_or_else(|| Error::model(field("site.body"), body, "unknown moving body"))?;
             ensure!(
-                pos.iter().chain(q.iter()).chain(gear.iter()).all(|x| x.is_finite())
+                pos.iter()
+                    .chain(q.iter())
+                    .chain(gear.iter())
+                    .all(|x| x.is_finite())
                     && q.iter().map(|x| x * x).sum::<f64>() > 1e-18,
                 Error::model(
                     field("site"),

@@ -17,7 +17,13 @@ fn pose(state: &State, b: usize) -> Pose {
 }
 
 /// Coordinate `dof` of joint `ji` and its rate (through the current free Jacobian).
-fn coordinate_and_rate(model: &Model, state: &State, ws: &Workspace, ji: usize, dof: usize) -> (f64, f64) {
+fn coordinate_and_rate(
+    model: &Model,
+    state: &State,
+    ws: &Workspace,
+    ji: usize,
+    dof: usize,
+) -> (f64, f64) {
     let joint = &model.joints[ji];
     let frame = JointFrame::new(joint, &pose(state, joint.parent), &pose(state, joint.child));
     let mut q = [0.0; 7];

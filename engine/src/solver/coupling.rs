@@ -15,7 +15,13 @@ fn pose_of(state: &State, b: usize) -> Pose {
 }
 
 /// Coordinate `dof` of joint `ji` with its free-Jacobian row, at the given poses.
-fn coordinate(model: &Model, ji: usize, dof: usize, parent: &Pose, child: &Pose) -> (f64, [f64; 12]) {
+fn coordinate(
+    model: &Model,
+    ji: usize,
+    dof: usize,
+    parent: &Pose,
+    child: &Pose,
+) -> (f64, [f64; 12]) {
     let joint = &model.joints[ji];
     let frame = JointFrame::new(joint, parent, child);
     let mut q = [0.0; 7];
@@ -43,8 +49,7 @@ fn value_at(model: &Model, c: usize, poses: &dyn Fn(usize) -> Pose) -> (f64, f64
 /// The coupling's terms: (joint, dof) with the coefficient of its free-Jacobian row in `K`.
 fn terms(model: &Model, c: usize, slope: f64) -> impl Iterator<Item = (usize, usize, f64)> {
     let cp = &model.couplings[c];
-    std::iter::once((cp.joint1.0, cp.joint1.1, 1.0))
-        .chain(cp.joint2.map(|(j, d)| (j, d, slope)))
+    std::iter::once((cp.joint1.0, cp.joint1.1, 1.0)).chain(cp.joint2.map(|(j, d)| (j, d, slope)))
 }
 
 /// Slopes at the current configuration (they fix `K` for the step).
