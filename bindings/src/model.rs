@@ -85,15 +85,9 @@ impl PyModelBuilder {
         gear: f64,
         ctrlrange: Option<(f64, f64)>,
     ) {
-        self.inner.add_actuator(ActuatorSpec {
-            gain: 1.0,
-            bias: [0.0; 3],
-            name,
-            joint,
-            dof,
-            gear,
-            ctrlrange,
-        });
+        let mut spec = ActuatorSpec::motor(&name, &joint, dof, gear);
+        spec.ctrlrange = ctrlrange;
+        self.inner.add_actuator(spec);
     }
 
     #[allow(clippy::too_many_arguments)]

@@ -254,6 +254,12 @@ pub struct Workspace {
     /// Free-coordinate Jacobian at the current configuration, per joint `nfree × 12`.
     pub(crate) free_jac: Vec<f64>,
     pub(crate) free_adr: Vec<usize>,
+    /// Spring and applied generalized forces per joint free dof (current configuration).
+    pub(crate) joint_tau: Vec<[f64; 6]>,
+    /// Scalar force of each actuator (current state and controls).
+    pub(crate) act_force: Vec<f64>,
+    /// `∂k/∂x` of each joint coupling at the current configuration.
+    pub(crate) coupling_slope: Vec<f64>,
     /// Contact frames at the current configuration.
     pub(crate) contact_now: Vec<crate::contact::ContactFrame>,
     /// Signed distance and its gradient row at the trial next configuration, per contact.
@@ -349,6 +355,9 @@ impl Workspace {
             jac_next: vec![0.0; 12 * t.ncon],
             free_jac: vec![0.0; nfree],
             free_adr,
+            joint_tau: vec![[0.0; 6]; model.njoint()],
+            act_force: vec![0.0; model.nu()],
+            coupling_slope: vec![0.0; model.couplings.len()],
             topology_id: model.topology_id(),
             nt: vec![None; model.ncontact()],
             nt_on: false,

@@ -17,15 +17,7 @@ fn limit_holds_and_releases() {
         .timestep(0.01)
         .body(BodySpec::new("bob", 1.0, [1e-3; 3]).pos([0.0, 0.0, -1.0]))
         .joint(j)
-        .actuator(ActuatorSpec {
-            gain: 1.0,
-            bias: [0.0; 3],
-            name: "m".into(),
-            joint: "hinge".into(),
-            dof: 0,
-            gear: 1.0,
-            ctrlrange: None,
-        })
+        .actuator(ActuatorSpec::motor("m", "hinge", 0, 1.0))
         .compile()
         .unwrap();
     assert_eq!(model.variable_counts()[2], ("joint_limit", 4));

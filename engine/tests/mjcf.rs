@@ -147,3 +147,95 @@ fn errors_name_element_attribute_and_line() {
         Err(Error::Unsupported(_))
     ));
 }
+
+/// Two hinges of one body about different anchors (MuJoCo's humanoid ankle): the body point at
+/// each anchor moves as MuJoCo's sequential composition says, `x = A₁ + Q₁(p₂ - p₁) - Q₁Q₂ p₂`.
+#[test]
+fn hinges_about_different_anchors_compose_in_sequence() {
+    let m = load(
+        r#"<mujoco><compiler angle="radian"/><worldbody><body name="foot" pos="0 0 1">
+          <joint name="ay" axis="0 1 0" pos="0 0 .08"/>
+          <joint name="ax" axis="1 0 .5" pos="0 0 .04"/>
+          <geom type="sphere" size=".05" pos=".1 0 0"/></body></worldbody></mujoco>"#,
+    )
+    .model;
+    assert_eq!((m.nq, m.nv), (2, 2));
+    let (t1, t2) = (0.7, -0.4);
+    let mut s = State::reference(&m);
+    set_minimal(&m, &mut s, &[t1, t2], &[0.3, -1.1]).unwrap();
+    let rot = |axis: nalgebra::Vector3<f64>, t: f64| {
+        nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), t)
+    };
+    let q1 = rot(nalgebra::Vector3::y(), t1);
+    let q2 = rot(nalgebra::Vector3::new(1.0, 0.0, 0.5), t2);
+    let (p1, p2) = (
+        nalgebra::Vector3::new(0.0, 0.0, 0.08),
+        nalgebra::Vector3::new(0.0, 0.0, 0.04),
+    );
+    let a1 = nalgebra::Vector3::new(0.0, 0.0, 1.0) + p1;
+    let origin = a1 + q1 * (p2 - p1) - q1 * q2 * p2;
+    let (pos, quat) = (s.pose(1).pos, s.pose(1).quat);
+    let com = m.bodies[1].com;
+    let rot_b = nalgebra::UnitQuaternion::from_quaternion(quat);
+    assert!(
+        (pos - rot_b * com - origin).norm() < 1e-14,
+        "{pos} vs {origin}"
+    );
+    let back = qvel(&m, &s);
+    assert!((qpos(&m, &s)[0] - t1).abs() < 1e-12 && (back[1] + 1.1).abs() < 1e-12);
+}
+
+/// `equality/joint` couples two slides by `y = 0.01 + 2 x` and stays satisfied while a force
+/// drives one of them; the driven body moves with the analytic acceleration of the coupled pair.
+#[test]
+fn joint_coupling_holds_and_moves_the_pair_together() {
+    let m = load(
+        r#"<mujoco><option gravity="0 0 0" timestep="0.001"/><worldbody>
+          <body name="a"><joint name="x" type="slide" axis="1 0 0"/>
+            <inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/></body>
+          <body name="b" pos="0 1 0"><joint name="y" type="slide" axis="1 0 0"/>
+            <inertial pos="0 0 0" mass="2" diaginertia="1 1 1"/></body></worldbody>
+          <equality><joint joint1="y" joint2="x" polycoef="0.01 2"/></equality>
+          <actuator><motor joint="x"/></actuator></mujoco>"#,
+    )
+    .model;
+    let mut s = State::reference(&m);
+    set_minimal(&m, &mut s, &[0.0, 0.01], &[0.0, 0.0]).unwrap();
+    let mut ws = ukemi_engine::Workspace::new(&m);
+    let n = 100;
+    for _ in 0..n {
+        ukemi_engine::step(&m, &mut s, &mut ws, &[3.0]).unwrap();
+        let q = qpos(&m, &s);
+        assert!((q[1] - 0.01 - 2.0 * q[0]).abs() < 1e-9, "{q:?}");
+    }
+    // effective inertia m_x + 2² m_y = 9 under force 3: ẍ = 1/3
+    let t = n as f64 * 0.001;
+    let v = qvel(&m, &s);
+    assert!((v[0] - t / 3.0).abs() < 1e-9, "{v:?}");
+}
+
+/// A site actuator pushes along the site's z axis, wherever the site sits on the body: four
+/// thrusters `gear="0 0 1 0 0 ±c"` with cancelling torques lift the body at `4u/m - g`.
+#[test]
+fn site_thrust_lifts_at_the_analytic_acceleration() {
+    let m = load(
+        r#"<mujoco><option timestep="0.01"/><worldbody><body name="x2" pos="0 0 1"><freejoint/>
+          <inertial pos="0 0 0" mass="1.5" diaginertia="0.01 0.02 0.03"/>
+          <site name="t1" pos="-.14 -.18 .05"/><site name="t2" pos="-.14 .18 .05"/>
+          <site name="t3" pos=".14 .18 .05"/><site name="t4" pos=".14 -.18 .05"/></body></worldbody>
+          <actuator><motor site="t1" gear="0 0 1 0 0 -.02"/><motor site="t2" gear="0 0 1 0 0 .02"/>
+            <motor site="t3" gear="0 0 1 0 0 .02"/><motor site="t4" gear="0 0 1 0 0 -.02"/>
+          </actuator></mujoco>"#,
+    )
+    .model;
+    let mut s = State::reference(&m);
+    let mut ws = ukemi_engine::Workspace::new(&m);
+    let u = 5.0;
+    for _ in 0..50 {
+        ukemi_engine::step(&m, &mut s, &mut ws, &[u; 4]).unwrap();
+    }
+    let v = qvel(&m, &s);
+    let expected = (4.0 * u / 1.5 - 9.81) * 0.5;
+    assert!((v[2] - expected).abs() < 1e-9, "{v:?} vs {expected}");
+    assert!(v[3..].iter().all(|w| w.abs() < 1e-9), "{v:?}");
+}

@@ -1,10 +1,12 @@
 """Dojo paper Table V workload: forward step + full minimal-coordinate Jacobians A and B every
 step, for 1000 steps at dt = 0.01 with random controls in the control range, against MuJoCo
-(mj_step + mjd_transitionFD) on the same MJCF file, in the same run. Also forward only and the
-rollout VJP. Numbers are printed, not asserted.
+(mj_step + mjd_transitionFD with forward differences, as ../shared/models/README.md measures
+its reference figures) on the same MJCF file, in the same run, each timing the mean of
+`--repeats` runs. Also forward only and the rollout VJP. Numbers are printed, not asserted.
 
     .venv/bin/python examples/benchmarks/table5.py            # reduced: 100 steps
-    .venv/bin/python examples/benchmarks/table5.py --steps 1000
+    .venv/bin/python examples/benchmarks/table5.py --steps 1000 --repeats 5   # the README's
+    .venv/bin/python examples/benchmarks/table5.py --only shared/   # the four shared robots
 """
 
 from __future__ import annotations
@@ -77,7 +79,7 @@ def bench_mujoco(path, ctrls, with_jac):
     for u in ctrls:
         d.ctrl[:] = u
         if with_jac:
-            mujoco.mjd_transitionFD(m, d, 1e-6, 1, A, B, None, None)
+            mujoco.mjd_transitionFD(m, d, 1e-6, 0, A, B, None, None)  # forward differences
         mujoco.mj_step(m, d)
     return time.perf_counter() - t0
 
@@ -85,11 +87,16 @@ def bench_mujoco(path, ctrls, with_jac):
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--repeats", type=int, default=1, help="timings are the mean of this many runs")
+    ap.add_argument("--only", default="", help="run models whose name contains this")
     args = ap.parse_args()
+    mean = lambda f: [sum(x) / args.repeats for x in zip(*(f() for _ in range(args.repeats)))]
     rng = np.random.default_rng(0)
     print(f"{'model':24s} {'nv':>4s} {'nu':>3s} | {'ukemi fwd':>10s} {'mj fwd':>9s} | "
           f"{'ukemi A,B':>10s} {'mj FD':>9s} {'ratio':>6s} | {'rollout VJP':>11s} {'/mj FD':>7s}")
     for name, path in models():
+        if args.only not in name:
+            continue
         if not path.exists():
             print(f"{name:24s} skipped: {path} not found")
             continue
@@ -104,10 +111,10 @@ def main():
         lo = np.where(np.isfinite(r[:, 0]), r[:, 0], -1.0) if model.nu else np.zeros(0)
         hi = np.where(np.isfinite(r[:, 1]), r[:, 1], 1.0) if model.nu else np.zeros(0)
         ctrls = random_ctrls(lo, hi, args.steps, rng)
-        tf, ff = bench_ukemi(model, ctrls, False)
-        tj, fj = bench_ukemi(model, ctrls, True)
-        tv, okv = bench_rollout_vjp(model, ctrls)
-        mf, mj = bench_mujoco(path, ctrls, False), bench_mujoco(path, ctrls, True)
+        tf, ff = mean(lambda: bench_ukemi(model, ctrls, False))
+        tj, fj = mean(lambda: bench_ukemi(model, ctrls, True))
+        tv, okv = mean(lambda: bench_rollout_vjp(model, ctrls))
+        mf, mj = mean(lambda: (bench_mujoco(path, ctrls, False), bench_mujoco(path, ctrls, True)))
         print(f"{name:24s} {model.nv:4d} {model.nu:3d} | {tf:9.3f}s {mf:8.3f}s | {tj:9.3f}s {mj:8.3f}s "
               f"{tj / mj:6.2f} | {tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f}"
               + (f"   ({ff} fwd / {fj} jac steps unconverged)" if ff or fj else ""))

@@ -10,6 +10,7 @@
 use nalgebra::Vector3;
 
 use super::geometry::{JointFrame, Pose, joint_angvel, joint_rotation};
+use super::offsets;
 use crate::math::quat;
 use crate::model::Model;
 use crate::state::State;
@@ -131,7 +132,10 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
         let rot_c = quat::rotation(&child_quat);
         let free = j.trans_basis.columns(0, j.ntrans);
         let delta = free * nalgebra::DVector::from_column_slice(&q[..j.ntrans]);
-        let delta = Vector3::new(delta[0], delta[1], delta[2]);
+        // hinges about offset anchors displace the child anchor by g(θ) (joints::offsets)
+        let (g, dg_dtheta) =
+            offsets::displacement_at_angles(&j.rot, &j.hinge_offsets, &q[j.ntrans..]);
+        let delta = Vector3::new(delta[0], delta[1], delta[2]) + g;
         let a_p = parent.pos + rot_p * j.parent_anchor;
         let a_c = a_p + rot_pj * delta;
         let child = Pose {
@@ -149,7 +153,10 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
         let w_c = rot_j.transpose() * quat::rotation(&j.offset).transpose() * w_p
             + joint_angvel(&j.rot, &qj, &qd[j.ntrans..]);
         let ddelta = free * nalgebra::DVector::from_column_slice(&qd[..j.ntrans]);
-        let ddelta = Vector3::new(ddelta[0], ddelta[1], ddelta[2]);
+        let ddelta = Vector3::new(ddelta[0], ddelta[1], ddelta[2])
+            + (0..j.rot.nfree().min(3))
+                .map(|i| dg_dtheta[i] * qd[j.ntrans + i])
+                .sum::<Vector3<f64>>();
         let w_pw = rot_p * w_p;
         let adot_p = v_p + w_pw.cross(&(rot_p * j.parent_anchor));
         let adot_c = adot_p + rot_pj * ddelta + w_pw.cross(&(rot_pj * delta));

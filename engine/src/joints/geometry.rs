@@ -5,7 +5,7 @@
 //! rotation `q ⊗ [1, δφ/2]`. Jacobians have 12 columns: parent `(δp, δφ)`, child `(δp, δφ)`.
 use nalgebra::{Matrix3, Matrix3x4, SMatrix, Vector3};
 
-use super::{Joint, RotDofs, hinges};
+use super::{Joint, RotDofs, hinges, offsets};
 use crate::math::quat::{self, Quat};
 use crate::math::spatial::skew;
 
@@ -42,7 +42,11 @@ pub struct JointFrame {
     qj: Quat,
     rot_j: Matrix3<f64>,
     /// Anchor displacement in the parent joint frame, `Δ = R_pjᵀ (a_child - a_parent)`.
+    delta_raw: Vector3<f64>,
+    /// `Δ - g(q_joint)`: the displacement left after hinges about offset anchors ([`offsets`]).
     delta: Vector3<f64>,
+    /// `∂g/∂δφ_c` (zero without hinge offsets).
+    offset_jac: Matrix3<f64>,
 }
 
 impl JointFrame {
@@ -55,30 +59,42 @@ impl JointFrame {
         let qj = quat::conj(&joint.offset) * quat::conj(&parent.quat) * child.quat;
         let a_p = parent.pos + rot_p * joint.parent_anchor;
         let a_c = child.pos + rot_c * joint.child_anchor;
-        let delta = rot_pj.transpose() * (a_c - a_p);
+        let delta_raw = rot_pj.transpose() * (a_c - a_p);
+        let rot_j = quat::rotation(&qj);
+        let (g, offset_jac) = if joint.hinge_offsets.is_empty() {
+            (Vector3::zeros(), Matrix3::zeros())
+        } else {
+            offsets::displacement(&joint.rot, &joint.hinge_offsets, &qj, &rot_j)
+        };
         JointFrame {
             rot_p,
             rot_c,
             rot_off,
             rot_pj,
-            rot_j: quat::rotation(&qj),
+            rot_j,
             qj,
-            delta,
+            delta_raw,
+            delta: delta_raw - g,
+            offset_jac,
         }
     }
 
-    /// `∂Δ/∂(δp_p, δφ_p, δp_c, δφ_c)`, 3 × 12.
+    /// `∂(Δ - g)/∂(δp_p, δφ_p, δp_c, δφ_c)`, 3 × 12.
     fn delta_jacobian(&self, joint: &Joint) -> SMatrix<f64, 3, 12> {
         let t = self.rot_pj.transpose();
         let mut m = SMatrix::<f64, 3, 12>::zeros();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-t));
         // δΔ = R_pjᵀ R_p skew(r_p) δφ_p + skew(Δ) R_offᵀ δφ_p   (anchor arm and frame rotation)
+        // δg = -∂g/∂δφ_c R_jᵀ R_offᵀ δφ_p + ∂g/∂δφ_c δφ_c   (g depends on q_joint only)
+        let dg_dc = self.offset_jac;
+        let dg_dp = -dg_dc * self.rot_j.transpose() * self.rot_off.transpose();
         let dp = t * self.rot_p * skew(&joint.parent_anchor)
-            + skew(&self.delta) * self.rot_off.transpose();
+            + skew(&self.delta_raw) * self.rot_off.transpose()
+            - dg_dp;
         m.fixed_view_mut::<3, 3>(0, 3).copy_from(&dp);
         m.fixed_view_mut::<3, 3>(0, 6).copy_from(&t);
         m.fixed_view_mut::<3, 3>(0, 9)
-            .copy_from(&(-t * self.rot_c * skew(&joint.child_anchor)));
+            .copy_from(&(-t * self.rot_c * skew(&joint.child_anchor) - dg_dc));
         m
     }
 

@@ -6,9 +6,11 @@
 //! the free directions are the joint's minimal coordinates (`qpos`, `qvel`), on which springs,
 //! dampers and inputs act. The sixteen combinations are the [`JointKind`] variants.
 pub mod coordinates;
+pub mod coupling;
 pub mod geometry;
 pub mod hinges;
 mod kind;
+pub mod offsets;
 
 pub use kind::JointKind;
 
@@ -120,6 +122,10 @@ pub struct Joint {
     pub qpos_ref: Vec<f64>,
     /// Rotor inertia per free dof (MuJoCo's `armature`, kg or kg·m²); empty means none.
     pub armature: Vec<f64>,
+    /// Hinges about different anchors: `p_{i+1} - p_i` for consecutive hinges, joint frame (m);
+    /// empty when all hinges share one anchor. The child anchor is then the last hinge's
+    /// ([`offsets`]).
+    pub hinge_offsets: Vec<Vector3<f64>>,
     /// First index in `qpos` (tree joints only).
     pub qpos_adr: usize,
     /// First index in `qvel` (tree joints only).

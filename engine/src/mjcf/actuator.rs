@@ -1,17 +1,23 @@
-//! `<actuator>` (motor, position, velocity, general with a joint transmission), `<keyframe>`,
-//! `<equality>` (connect and weld as loop-closing joints) and `<contact>` (exclude).
+//! `<actuator>` (motor, position, velocity, general with a joint, fixed-tendon or site
+//! transmission, `forcerange`), `<keyframe>`, `<equality>` (connect and weld as loop-closing
+//! joints, joint as a coupling) and `<contact>` (exclude).
 use nalgebra::Vector3;
 use roxmltree::Node;
 
 use super::body::Tree;
 use super::parse::{Ctx, elements};
 use crate::model::Keyframe;
+use crate::model::{CouplingSpec, TransmissionSpec};
 use crate::{ActuatorSpec, JointKind, JointSpec, ModelBuilder, Result};
+
+/// Fixed tendons by name: `(engine joint, free dof, coef)` per MJCF joint term.
+pub(super) type Tendons = std::collections::HashMap<String, Vec<(String, usize, f64)>>;
 
 pub(super) fn read_actuators<'a, 'i>(
     ctx: &mut Ctx<'a, 'i>,
     node: Node<'a, 'i>,
     tree: &Tree,
+    tendons: &Tendons,
     b: &mut ModelBuilder,
 ) -> Result<()> {
     for (i, a) in elements(node).enumerate() {
@@ -25,65 +31,173 @@ pub(super) fn read_actuators<'a, 'i>(
             .map_or_else(|| format!("actuator{i}"), str::to_string);
         ctx.lines.insert(format!("actuator[{name}]"), ctx.line(a));
         for t in [
-            "tendon",
-            "site",
             "body",
             "jointinparent",
             "cranksite",
             "slidersite",
+            "refsite",
         ] {
             if a.attribute(t).is_some() {
                 return Err(ctx.unsupported(
                     a,
-                    format!(
-                        "actuator {name:?}: `{t}` transmission is not supported (only `joint`)"
-                    ),
+                    format!("actuator {name:?}: `{t}` transmission is not supported (joint, tendon and site are)"),
                 ));
             }
         }
-        let joint = a
-            .attribute("joint")
-            .ok_or_else(|| ctx.err(a, format!("actuator {name:?} needs a `joint`")))?;
-        let map = tree
-            .joints
-            .iter()
-            .find(|j| j.name == joint)
-            .ok_or_else(|| ctx.err(a, format!("attribute `joint` = {joint:?}: unknown joint")))?;
-        if map.kind == "ball" || map.kind == "free" {
-            return Err(ctx.unsupported(a, format!("actuator {name:?} on a {} joint", map.kind)));
-        }
-        let gear = ctx.nums_padded(a, &class, "gear", &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0])?[0];
-        let ctrlrange = ctx.nums(a, &class, "ctrlrange", 2)?;
-        let limited = ctx
-            .tristate(a, &class, "ctrllimited")?
-            .unwrap_or(ctx.compiler.autolimits && ctrlrange.is_some());
-        let ctrlrange = match (limited, ctrlrange) {
-            (false, _) => None,
-            (true, Some(r)) if r[0] < r[1] => Some((r[0], r[1])),
-            (true, r) => {
-                return Err(ctx.err(
+        let gear6 = ctx.nums_padded(a, &class, "gear", &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0])?;
+        let (joint, dof, transmission) = transmission(ctx, a, &name, tree, tendons, &gear6)?;
+        let gear = gear6[0];
+        let range = |ctx: &Ctx<'a, 'i>, attr: &str, lim: &str| -> Result<Option<(f64, f64)>> {
+            let r = ctx.nums(a, &class, attr, 2)?;
+            let limited = ctx
+                .tristate(a, &class, lim)?
+                .unwrap_or(ctx.compiler.autolimits && r.is_some());
+            match (limited, r) {
+                (false, _) => Ok(None),
+                (true, Some(r)) if r[0] < r[1] => Ok(Some((r[0], r[1]))),
+                (true, r) => Err(ctx.err(
                     a,
-                    format!("attribute `ctrlrange` = {r:?}: need lower < upper when ctrllimited"),
-                ));
+                    format!("attribute `{attr}` = {r:?}: need lower < upper when {lim}"),
+                )),
             }
         };
-        let forcelimited = ctx.tristate(a, &class, "forcelimited")?;
-        if forcelimited
-            .unwrap_or(ctx.compiler.autolimits && ctx.raw(a, &class, "forcerange").is_some())
-        {
-            ctx.warn(
-                a,
-                "`forcerange` (actuator force clamp) is not supported and is ignored",
-            );
-        }
+        let ctrlrange = range(ctx, "ctrlrange", "ctrllimited")?;
+        let forcerange = range(ctx, "forcerange", "forcelimited")?;
         let (gain, bias) = gain_bias(ctx, a, &class, tag)?;
-        let mut spec = ActuatorSpec::motor(&name, &map.engine_joint, map.dof, gear);
+        if matches!(transmission, TransmissionSpec::Site { .. })
+            && (bias[1] != 0.0 || bias[2] != 0.0)
+        {
+            return Err(ctx.unsupported(
+                a,
+                format!("actuator {name:?}: a servo (length or velocity bias) on a site"),
+            ));
+        }
+        let mut spec = ActuatorSpec::motor(&name, &joint, dof, gear);
         spec.ctrlrange = ctrlrange;
+        spec.forcerange = forcerange;
         spec.gain = gain;
         spec.bias = bias;
+        spec.transmission = transmission;
         b.add_actuator(spec);
     }
     Ok(())
+}
+
+/// The actuator's transmission: `(engine joint, dof, spec)`; joint and dof only for joints.
+fn transmission<'a, 'i>(
+    ctx: &Ctx<'a, 'i>,
+    a: Node<'a, 'i>,
+    name: &str,
+    tree: &Tree,
+    tendons: &Tendons,
+    gear6: &[f64],
+) -> Result<(String, usize, TransmissionSpec)> {
+    if let Some(t) = a.attribute("tendon") {
+        let terms = tendons.get(t).ok_or_else(|| {
+            ctx.err(
+                a,
+                format!("attribute `tendon` = {t:?}: unknown fixed tendon"),
+            )
+        })?;
+        return Ok((String::new(), 0, TransmissionSpec::Tendon(terms.clone())));
+    }
+    if let Some(s) = a.attribute("site") {
+        let (_, body, local) = tree
+            .sites
+            .iter()
+            .find(|x| x.0 == s)
+            .ok_or_else(|| ctx.err(a, format!("attribute `site` = {s:?}: unknown site")))?;
+        let engine = tree.bodies[*body].engine;
+        if engine == 0 {
+            return Err(
+                ctx.unsupported(a, format!("actuator {name:?}: site {s:?} on a static body"))
+            );
+        }
+        let on_body = tree.engine_bodies[engine]
+            .1
+            .relative(&tree.bodies[*body].world.compose(local));
+        let mut gear = [0.0; 6];
+        gear.copy_from_slice(&gear6[..6]);
+        let spec = TransmissionSpec::Site {
+            body: tree.engine_bodies[engine].0.clone(),
+            pos: on_body.pos.into(),
+            quat: on_body.wxyz(),
+            gear,
+        };
+        return Ok((String::new(), 0, spec));
+    }
+    let joint = a.attribute("joint").ok_or_else(|| {
+        ctx.err(
+            a,
+            format!("actuator {name:?} needs a `joint`, `tendon` or `site`"),
+        )
+    })?;
+    let map = tree
+        .joints
+        .iter()
+        .find(|j| j.name == joint)
+        .ok_or_else(|| ctx.err(a, format!("attribute `joint` = {joint:?}: unknown joint")))?;
+    if map.kind == "ball" || map.kind == "free" {
+        return Err(ctx.unsupported(a, format!("actuator {name:?} on a {} joint", map.kind)));
+    }
+    Ok((map.engine_joint.clone(), map.dof, TransmissionSpec::Joint))
+}
+
+/// Fixed tendons (used by actuators). Limits are not enforced (warned); stiffness, damping and
+/// friction are unsupported; spatial tendons are unsupported when anything uses them.
+pub(super) fn read_tendons<'a, 'i>(
+    ctx: &mut Ctx<'a, 'i>,
+    root: Node<'a, 'i>,
+    tree: &Tree,
+) -> Result<Tendons> {
+    let mut out = Tendons::new();
+    for node in elements(root).filter(|n| n.tag_name().name() == "tendon") {
+        for t in elements(node) {
+            let class = ctx.class_of(t, "main")?;
+            let name = t.attribute("name").unwrap_or("").to_string();
+            let active = ["stiffness", "damping", "frictionloss"].iter().any(|a| {
+                ctx.raw(t, &class, a)
+                    .is_some_and(|v| v.trim().parse::<f64>() != Ok(0.0))
+            });
+            if active {
+                return Err(ctx.unsupported(
+                    t,
+                    "tendons with stiffness, damping or friction are not supported",
+                ));
+            }
+            let limited = ctx.tristate(t, &class, "limited")?;
+            let range = ctx.nums(t, &class, "range", 2)?;
+            if limited.unwrap_or(ctx.compiler.autolimits && range.is_some()) {
+                // NOTE: a tendon limit is an inequality on Σ coef q across joints; ukemi has
+                // limits per joint only, so this one is reported, never silently dropped
+                ctx.warn(
+                    t,
+                    format!("tendon {name:?} range {range:?} is NOT enforced (tendon limits are not supported): trajectories differ from MuJoCo whenever the tendon length leaves its range"),
+                );
+            }
+            if t.tag_name().name() != "fixed" {
+                ctx.warn(t, "spatial tendon ignored (no stiffness, damping or limits; actuators cannot use it)");
+                continue;
+            }
+            let mut terms = Vec::new();
+            for j in elements(t) {
+                let jn = j.attribute("joint").unwrap_or("");
+                let map = tree.joints.iter().find(|m| m.name == jn).ok_or_else(|| {
+                    ctx.err(j, format!("attribute `joint` = {jn:?}: unknown joint"))
+                })?;
+                if map.kind != "hinge" && map.kind != "slide" {
+                    return Err(ctx.unsupported(j, format!("fixed tendon on a {} joint", map.kind)));
+                }
+                terms.push((
+                    map.engine_joint.clone(),
+                    map.dof,
+                    ctx.num(j, "", "coef", 0.0)?,
+                ));
+            }
+            out.insert(name, terms);
+        }
+    }
+    Ok(out)
 }
 
 /// MuJoCo's gain and affine bias of each actuator shortcut.
@@ -208,14 +322,18 @@ pub(super) fn read_equality<'a, 'i>(
 ) -> Result<()> {
     for (i, e) in elements(node).enumerate() {
         let tag = e.tag_name().name();
-        if !["connect", "weld"].contains(&tag) {
+        if !["connect", "weld", "joint"].contains(&tag) {
             return Err(ctx.unsupported(
                 e,
-                format!("equality <{tag}> is not supported (connect and weld are)"),
+                format!("equality <{tag}> is not supported (connect, weld and joint are)"),
             ));
         }
         if e.attribute("active") == Some("false") {
             ctx.warn(e, "inactive equality constraint skipped");
+            continue;
+        }
+        if tag == "joint" {
+            read_joint_coupling(ctx, e, i, tree, b)?;
             continue;
         }
         if e.attribute("site1").is_some() || e.attribute("site2").is_some() {
@@ -267,6 +385,51 @@ pub(super) fn read_equality<'a, 'i>(
                 .closing_loop(),
         );
     }
+    Ok(())
+}
+
+/// `equality/joint`: `joint1 - qpos0₁ = Σ polycoef_i (joint2 - qpos0₂)^i` as a coupling.
+fn read_joint_coupling<'a, 'i>(
+    ctx: &mut Ctx<'a, 'i>,
+    e: Node<'a, 'i>,
+    index: usize,
+    tree: &Tree,
+    b: &mut ModelBuilder,
+) -> Result<()> {
+    let class = ctx.class_of(e, "main")?;
+    let name = e
+        .attribute("name")
+        .map_or_else(|| format!("equality{index}"), str::to_string);
+    ctx.lines.insert(format!("coupling[{name}]"), ctx.line(e));
+    let joint = |attr: &str| -> Result<Option<(String, usize)>> {
+        let Some(n) = e.attribute(attr) else {
+            return Ok(None);
+        };
+        let map = tree
+            .joints
+            .iter()
+            .find(|j| j.name == n)
+            .ok_or_else(|| ctx.err(e, format!("attribute `{attr}` = {n:?}: unknown joint")))?;
+        if map.kind != "hinge" && map.kind != "slide" {
+            return Err(ctx.unsupported(
+                e,
+                format!(
+                    "equality <joint> on {} joint {n:?} (hinge and slide only)",
+                    map.kind
+                ),
+            ));
+        }
+        Ok(Some((map.engine_joint.clone(), map.dof)))
+    };
+    let joint1 = joint("joint1")?.ok_or_else(|| ctx.err(e, "`joint1` is required"))?;
+    let joint2 = joint("joint2")?;
+    let polycoef = ctx.nums_padded(e, &class, "polycoef", &[0.0, 1.0, 0.0, 0.0, 0.0])?;
+    b.add_coupling(CouplingSpec {
+        name,
+        joint1,
+        joint2,
+        polycoef,
+    });
     Ok(())
 }
 

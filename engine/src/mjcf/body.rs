@@ -43,6 +43,8 @@ pub(super) struct Tree {
     pub engine_parent: Vec<usize>,
     pub joints: Vec<JointMap>,
     pub geoms: Vec<PlacedGeom>,
+    /// Sites: (name, MJCF body, frame in that body).
+    pub sites: Vec<(String, usize, Frame)>,
 }
 
 impl Tree {
@@ -94,7 +96,9 @@ fn read_children<'a, 'i>(
             "geom" | "joint" | "freejoint" | "inertial" => {}
             "site" => {
                 let c = ctx.class_of(child, class)?;
-                local_frame(ctx, child, &c)?;
+                let frame = local_frame(ctx, child, &c)?;
+                let name = child.attribute("name").unwrap_or("").to_string();
+                tree.sites.push((name, body, frame));
             }
             "camera" | "light" => {}
             "frame" | "composite" | "flexcomp" | "replicate" | "attach" | "plugin" => {

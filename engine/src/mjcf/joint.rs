@@ -1,6 +1,7 @@
 //! The joints of one MJCF body become one engine joint whose free dofs are MuJoCo's dofs in
-//! MuJoCo's order: slides first (explicit translation axes), then 1-3 hinges about one point
-//! (explicit hinge axes, possibly non-orthogonal) or a ball; or a free joint alone.
+//! MuJoCo's order: slides first (explicit translation axes), then 1-3 hinges in sequence, each
+//! about its own anchor (explicit hinge axes, possibly non-orthogonal), or a ball; or a free
+//! joint alone.
 use nalgebra::Vector3;
 use roxmltree::Node;
 
@@ -171,12 +172,12 @@ pub(super) fn group_joints(
             "body {body:?}: more than three hinge joints"
         )));
     }
-    if let Some(first) = rots.first()
-        && let Some(other) = rots.iter().find(|j| (j.pos - first.pos).norm() > 1e-9)
+    if nball > 0
+        && let Some(other) = rots.iter().find(|j| (j.pos - rots[0].pos).norm() > 1e-9)
     {
         return Err(unsupported(format!(
-            "body {body:?}: hinge joints {:?} and {:?} have different positions; ukemi joins the joints of one body about one point",
-            first.name, other.name
+            "body {body:?}: ball joint and {:?} have different positions",
+            other.name
         )));
     }
     let names: Vec<&str> = joints.iter().map(|j| j.name.as_str()).collect();
@@ -194,6 +195,8 @@ pub(super) fn group_joints(
         spec.trans_axes = slides.iter().map(|j| j.axis).collect();
         if nball == 0 {
             spec.rot_axes = rots.iter().map(|j| j.axis).collect();
+            // each hinge turns about its own anchor, in sequence (joints::offsets)
+            spec.hinge_offsets = rots.windows(2).map(|w| w[1].pos - w[0].pos).collect();
         }
     }
     // per free dof (MuJoCo order: slides, then hinges or the ball's three)

@@ -4,13 +4,15 @@
 //! settotalmass), `option` (timestep, gravity), nested `default` classes with `class` and
 //! `childclass`, the body tree with every orientation form, `inertial`, inertia from geoms
 //! (sphere, capsule, cylinder, box, ellipsoid), hinge/slide/ball/free joints (several joints of
-//! one body become one engine joint with MuJoCo's dofs in MuJoCo's order), geoms with contact
-//! bit masks and `condim` 1 or 3, `contact/exclude`, `equality` connect/weld (loop joints),
-//! `actuator` motor/position/velocity/general on joints, and `keyframe`.
+//! one body become one engine joint with MuJoCo's dofs in MuJoCo's order, each hinge about its
+//! own anchor), geoms with contact bit masks and `condim` 1 or 3, `contact/exclude`, `equality`
+//! connect/weld (loop joints) and joint (a polynomial coupling solved with the joints), fixed
+//! tendons as actuator transmissions, `actuator` motor/position/velocity/general on joints,
+//! fixed tendons and sites (with `forcerange`), and `keyframe`.
 //!
 //! Anything else is an [`Error::Unsupported`] or an [`Error::Mjcf`] naming the element and its
 //! line, or — where ignoring it only drops an effect ukemi does not model (solver settings,
-//! fluid drag, dry joint friction, actuator force clamps, passive tendons, sensors) — a warning in
+//! fluid drag, dry joint friction, passive tendons, sensors) — a warning in
 //! [`MjcfModel::warnings`]. Soft-contact parameters (`solref`, `solimp`, `margin`, `gap`,
 //! `priority`) do not apply to hard contact and are ignored without a warning.
 //!
@@ -22,6 +24,8 @@
 //! * Geom pairs whose shapes have no collision kernel (e.g. capsule–cylinder) never collide;
 //!   each is reported as a warning.
 //! * Position/velocity servos act at the current configuration (explicit), like springs.
+//! * Fixed-tendon limits are not enforced; each one is reported as a warning.
+//! * `equality/joint` is a hard holonomic constraint (MuJoCo's is soft: `solref`/`solimp`).
 mod actuator;
 mod body;
 mod defaults;
@@ -102,12 +106,12 @@ pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
     b.set_condim_max(true);
     read_option(&mut ctx, root, &mut b)?;
     let tree = read_tree(&mut ctx, root, &mut b)?;
+    let tendons = actuator::read_tendons(&mut ctx, root, &tree)?;
     for node in elements(root) {
         match node.tag_name().name() {
-            "actuator" => actuator::read_actuators(&mut ctx, node, &tree, &mut b)?,
+            "actuator" => actuator::read_actuators(&mut ctx, node, &tree, &tendons, &mut b)?,
             "equality" => actuator::read_equality(&mut ctx, node, &tree, &mut b)?,
             "contact" => actuator::read_contact(&mut ctx, node, &tree, &mut b)?,
-            "tendon" => read_tendons(&mut ctx, node)?,
             "sensor" => ctx.warn(node, "sensors are not loaded"),
             "include" => return Err(ctx.unsupported(node, "<include> is not supported")),
             "deformable" | "extension" => {
@@ -272,30 +276,6 @@ fn read_option<'a, 'i>(
         for child in elements(node) {
             ctx.warn(child, "option flags are ignored");
         }
-    }
-    Ok(())
-}
-
-fn read_tendons<'a, 'i>(ctx: &mut Ctx<'a, 'i>, node: Node<'a, 'i>) -> Result<()> {
-    for t in elements(node) {
-        let class = ctx.class_of(t, "main")?;
-        let active = ["stiffness", "damping", "frictionloss"].iter().any(|a| {
-            ctx.raw(t, &class, a)
-                .is_some_and(|v| v.trim().parse::<f64>() != Ok(0.0))
-        });
-        let limited = ctx.tristate(t, &class, "limited")?;
-        let limited =
-            limited.unwrap_or(ctx.compiler.autolimits && ctx.raw(t, &class, "range").is_some());
-        if active || limited {
-            return Err(ctx.unsupported(
-                t,
-                "tendons with stiffness, damping, friction or limits are not supported",
-            ));
-        }
-        ctx.warn(
-            t,
-            "passive tendon ignored (it has no stiffness, damping or limits)",
-        );
     }
     Ok(())
 }

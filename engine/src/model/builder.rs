@@ -1,6 +1,9 @@
 //! Model construction and validation: [`ModelBuilder::compile`] is the only way to a [`Model`].
 use nalgebra::{Matrix3, Vector3};
 
+use super::transmission::{
+    CouplingSpec, TransmissionSpec, compile_couplings, compile_transmission,
+};
 use super::{Actuator, Body, Model, Options, Topology};
 use crate::contact::geometry::{self, Shape};
 use crate::contact::{Contact, ContactModel, Geom};
@@ -102,6 +105,10 @@ pub struct JointSpec {
     pub qpos_ref: Vec<f64>,
     /// Rotor inertia (MuJoCo's `armature`): one value for every free dof, or one per dof.
     pub armature: Vec<f64>,
+    /// Hinges about different anchors (MuJoCo's sequential joints): `p_{i+1} - p_i` for each
+    /// consecutive pair of the `rot_axes` hinges, child body frame (m). `child_anchor` (and
+    /// `parent_anchor`) are the first hinge's anchor. Empty: all hinges turn about one point.
+    pub hinge_offsets: Vec<Vector3<f64>>,
 }
 
 impl JointSpec {
@@ -124,6 +131,7 @@ impl JointSpec {
             rot_axes: vec![],
             qpos_ref: vec![],
             armature: vec![],
+            hinge_offsets: vec![],
         }
     }
     /// Axis in the child body frame.
@@ -179,6 +187,10 @@ pub struct ActuatorSpec {
     pub gain: f64,
     /// Bias terms: constant, per unit of actuator length `gear·q`, per unit of its rate.
     pub bias: [f64; 3],
+    /// Clamp of the scalar actuator force (MuJoCo's `forcerange`), if any.
+    pub forcerange: Option<(f64, f64)>,
+    /// Where the force acts (default: `joint`'s dof `dof`).
+    pub transmission: TransmissionSpec,
 }
 
 impl ActuatorSpec {
@@ -192,6 +204,8 @@ impl ActuatorSpec {
             ctrlrange: None,
             gain: 1.0,
             bias: [0.0; 3],
+            forcerange: None,
+            transmission: TransmissionSpec::Joint,
         }
     }
 }
@@ -268,6 +282,7 @@ pub struct ModelBuilder {
     excludes: Vec<(String, String)>,
     geom_excludes: Vec<(String, String)>,
     condim_max: bool,
+    couplings: Vec<CouplingSpec>,
 }
 
 impl ModelBuilder {
@@ -311,6 +326,10 @@ impl ModelBuilder {
     /// Add an actuator.
     pub fn add_actuator(&mut self, a: ActuatorSpec) {
         self.actuators.push(a);
+    }
+    /// Add a joint coupling (MuJoCo's `equality/joint`).
+    pub fn add_coupling(&mut self, c: CouplingSpec) {
+        self.couplings.push(c);
     }
     /// Add a collision geometry (fluent).
     pub fn geom(mut self, g: GeomSpec) -> Self {
@@ -359,9 +378,17 @@ impl ModelBuilder {
         assign_addresses(&mut joints);
         let geoms = self.compile_geoms(&names, &bodies)?;
         let contacts = self.compile_pairs(&geoms, &joints, &names)?;
-        let topology = Topology::new(bodies.len(), &joints, &parent_joint, &geoms, &contacts)
-            .map_err(|e| Error::model("joints", "graph", e))?;
-        let actuators = self.compile_actuators(&joints)?;
+        let couplings = compile_couplings(&self.couplings, &joints)?;
+        let topology = Topology::new(
+            bodies.len(),
+            &joints,
+            &parent_joint,
+            &geoms,
+            &contacts,
+            &couplings,
+        )
+        .map_err(|e| Error::model("joints", "graph", e))?;
+        let actuators = self.compile_actuators(&joints, &bodies)?;
         let nq = joints.iter().filter(|j| !j.is_loop).map(Joint::nq).sum();
         let nv = joints.iter().filter(|j| !j.is_loop).map(Joint::nfree).sum();
         let mut model = Model {
@@ -369,6 +396,7 @@ impl ModelBuilder {
             bodies,
             joints,
             actuators,
+            couplings,
             geoms,
             contacts,
             nq,
@@ -551,7 +579,7 @@ impl ModelBuilder {
         Ok(out)
     }
 
-    fn compile_actuators(&self, joints: &[Joint]) -> Result<Vec<Actuator>> {
+    fn compile_actuators(&self, joints: &[Joint], bodies: &[Body]) -> Result<Vec<Actuator>> {
         let mut out: Vec<Actuator> = Vec::new();
         for spec in &self.actuators {
             let f = |field: &str| format!("actuator[{}].{field}", spec.name);
@@ -559,15 +587,7 @@ impl ModelBuilder {
                 !out.iter().any(|a| a.name == spec.name),
                 Error::model(f("name"), &spec.name, "duplicate actuator name")
             );
-            let joint = joints
-                .iter()
-                .position(|j| j.name == spec.joint)
-                .ok_or_else(|| Error::model(f("joint"), &spec.joint, "unknown joint"))?;
-            let nfree = joints[joint].nfree();
-            ensure!(
-                spec.dof < nfree,
-                Error::model(f("dof"), spec.dof, format!("joint has {nfree} free dofs"))
-            );
+            let transmission = compile_transmission(spec, joints, bodies, &f)?;
             ensure!(
                 spec.gear.is_finite(),
                 Error::model(f("gear"), spec.gear, "must be finite")
@@ -582,12 +602,18 @@ impl ModelBuilder {
                     Error::model(f("ctrlrange"), (lo, hi), "need finite lower < upper")
                 );
             }
+            if let Some((lo, hi)) = spec.forcerange {
+                ensure!(
+                    !lo.is_nan() && !hi.is_nan() && lo <= hi,
+                    Error::model(f("forcerange"), (lo, hi), "need lower <= upper")
+                );
+            }
             out.push(Actuator {
                 name: spec.name.clone(),
-                joint,
-                dof: spec.dof,
+                transmission,
                 gear: spec.gear,
                 ctrlrange: spec.ctrlrange,
+                forcerange: spec.forcerange,
                 gain: spec.gain,
                 bias: spec.bias,
             });
@@ -768,7 +794,8 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         parent,
         child,
         parent_anchor: pa - pb.com,
-        child_anchor: ca - cb.com,
+        // with offset hinges the child side is anchored at the last hinge (joints::offsets)
+        child_anchor: ca + spec.hinge_offsets.iter().sum::<Vector3<f64>>() - cb.com,
         offset,
         trans_basis,
         trans_dual,
@@ -785,6 +812,7 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         } else {
             broadcast(&spec.armature, nfree, &f("armature"))?
         },
+        hinge_offsets: hinge_offsets(spec)?,
         qpos_adr: 0,
         qvel_adr: 0,
     };
@@ -842,6 +870,30 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
         )
     );
     Ok(joint)
+}
+
+/// Validated hinge offsets: one per consecutive pair of explicit hinge axes, finite; all-zero
+/// offsets are dropped (one common anchor).
+fn hinge_offsets(spec: &JointSpec) -> Result<Vec<Vector3<f64>>> {
+    let field = format!("joint[{}].hinge_offsets", spec.name);
+    if spec.hinge_offsets.iter().all(|d| d.norm() == 0.0) {
+        return Ok(vec![]);
+    }
+    for d in &spec.hinge_offsets {
+        check_finite(d.as_slice(), &field)?;
+    }
+    let n = spec.rot_axes.len();
+    ensure!(
+        n >= 2 && spec.hinge_offsets.len() == n - 1,
+        Error::model(
+            &field,
+            spec.hinge_offsets.len(),
+            format!(
+                "need one offset per consecutive pair of the {n} explicit hinge axes (rot_axes)"
+            )
+        )
+    );
+    Ok(spec.hinge_offsets.clone())
 }
 
 /// Limits on every free dof (one `(lower, upper)` pair each); ball rotations cannot be limited.

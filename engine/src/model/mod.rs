@@ -4,16 +4,19 @@ mod builder;
 mod options;
 pub(crate) mod params;
 mod topology;
+mod transmission;
 
 pub use builder::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, ModelBuilder};
 pub use options::Options;
 pub(crate) use topology::Topology;
 pub(crate) use topology::body_node as topology_body_node;
+pub use transmission::{CouplingSpec, Transmission, TransmissionSpec};
 
 use nalgebra::{Matrix3, Vector3};
 
 use crate::contact::{Contact, Geom};
 use crate::joints::Joint;
+use crate::joints::coupling::Coupling;
 use crate::joints::geometry::Pose;
 
 /// A rigid body. Body 0 is the world.
@@ -31,20 +34,22 @@ pub struct Body {
     pub ref_pose: Pose,
 }
 
-/// An actuator: a generalized force `gear · (gain · clamp(ctrl) + bias₀ + bias₁ gear q +
-/// bias₂ gear q̇)` on one free dof of a joint (`gain = 1`, `bias = 0`: a motor).
+/// An actuator: a scalar force `F = clamp(gain · clamp(ctrl) + bias₀ + bias₁ L + bias₂ L̇,
+/// forcerange)` (`L = gear · length` of the transmission), applied as `gear · F` on a joint dof,
+/// `gear · coef_i · F` on each dof of a fixed tendon, or as a site wrench (MuJoCo's affine
+/// `general` actuator; `gain = 1`, `bias = 0`: a motor).
 #[derive(Clone, Debug)]
 pub struct Actuator {
     /// Unique name.
     pub name: String,
-    /// Joint index.
-    pub joint: usize,
-    /// Free dof of that joint (0-based, in its `qvel` order).
-    pub dof: usize,
-    /// Gear ratio.
+    /// Where the force acts.
+    pub transmission: Transmission,
+    /// Gear ratio (joint and tendon transmissions; the first gear entry for sites).
     pub gear: f64,
     /// Control clamp, if any.
     pub ctrlrange: Option<(f64, f64)>,
+    /// Clamp of the scalar force `F` (N or N·m), if any (MuJoCo's `forcerange`).
+    pub forcerange: Option<(f64, f64)>,
     /// Gain on the control.
     pub gain: f64,
     /// Bias: constant, per unit of `gear·q`, per unit of `gear·q̇` (position/velocity servos).
@@ -84,6 +89,8 @@ pub struct Model {
     pub joints: Vec<Joint>,
     /// Actuators, in declaration order (`ctrl` follows it).
     pub actuators: Vec<Actuator>,
+    /// Joint couplings (MuJoCo's `equality/joint`), solved with the joints.
+    pub couplings: Vec<Coupling>,
     /// Collision geometries.
     pub geoms: Vec<Geom>,
     /// Contact candidates, decided at compile time.

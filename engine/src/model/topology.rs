@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::contact::{Contact, Geom};
 use crate::joints::Joint;
+use crate::joints::coupling::Coupling;
 use crate::solver::graph_ldu::BlockPattern;
 
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
@@ -47,6 +48,11 @@ pub(crate) struct Topology {
     /// (node row, body col) and (body row, node col) blocks of each limit node for the joint's
     /// parent and child.
     pub limit_blocks: Vec<[Option<(usize, usize)>; 2]>,
+    /// Node (one impulse row) of each joint coupling, eliminated last like loop joints.
+    pub coupling_node: Vec<usize>,
+    /// Per coupling, each distinct moving body it acts on with its (node row, body col) and
+    /// (body row, node col) blocks.
+    pub coupling_blocks: Vec<Vec<(usize, (usize, usize))>>,
     /// Node of each contact candidate.
     pub contact_node: Vec<usize>,
     /// Blocks of each contact node for the bodies of geom a and geom b.
@@ -72,6 +78,7 @@ impl Topology {
         parent_joint: &[Option<usize>],
         geoms: &[Geom],
         contacts: &[Contact],
+        couplings: &[Coupling],
     ) -> Result<Self, String> {
         let nmoving = nbody - 1;
         let mut dims = vec![6; nmoving];
@@ -85,6 +92,22 @@ impl Topology {
                 joint_node[j] = Some(dims.len());
                 dims.push(joint.ncon());
             }
+        }
+        // couplings: smooth nodes (before the inequality leaves), touching up to four bodies
+        let mut coupling_node = Vec::with_capacity(couplings.len());
+        let mut coupling_bodies = Vec::with_capacity(couplings.len());
+        for c in couplings {
+            coupling_node.push(dims.len());
+            dims.push(1);
+            let mut bodies: Vec<usize> = Vec::new();
+            for (j, _) in std::iter::once(c.joint1).chain(c.joint2) {
+                for b in [joints[j].parent, joints[j].child] {
+                    if b > 0 && !bodies.contains(&b) {
+                        bodies.push(b);
+                    }
+                }
+            }
+            coupling_bodies.push(bodies);
         }
         let mut leaves = Vec::new();
         let mut limit_node = vec![None; joints.len()];
@@ -107,6 +130,13 @@ impl Topology {
             cone_degree += o + q;
         }
         let mut edges = Vec::new();
+        for (c, bodies) in coupling_bodies.iter().enumerate() {
+            edges.extend(
+                bodies
+                    .iter()
+                    .filter_map(|&b| Some((coupling_node[c], body_node(b)?))),
+            );
+        }
         for (j, joint) in joints.iter().enumerate() {
             if let Some(n) = limit_node[j] {
                 edges.extend(body_node(joint.parent).map(|b| (n, b)));
@@ -137,6 +167,7 @@ impl Topology {
             &joint_node,
             dims.len(),
             &leaves,
+            &coupling_node,
         ));
         let pattern = BlockPattern::new(&dims, &edges, &order)?;
         let blk = |i: usize, j: usize| -> Option<(usize, usize)> {
@@ -168,6 +199,16 @@ impl Topology {
                 None => [None, None],
             })
             .collect();
+        let coupling_blocks = coupling_bodies
+            .iter()
+            .enumerate()
+            .map(|(c, bodies)| {
+                bodies
+                    .iter()
+                    .filter_map(|&b| Some((b, pair(coupling_node[c], b)?)))
+                    .collect()
+            })
+            .collect();
         let contact_blocks = contact_bodies
             .iter()
             .enumerate()
@@ -197,6 +238,8 @@ impl Topology {
             has_cones: cone_degree > 0,
             limit_node,
             limit_blocks,
+            coupling_node,
+            coupling_blocks,
             contact_node,
             contact_blocks,
             contact_bodies,
@@ -233,7 +276,7 @@ fn fk_order(joints: &[Joint], parent_joint: &[Option<usize>]) -> Vec<usize> {
     order
 }
 
-/// Post-order of the node tree (children before parents), loop joints last.
+/// Post-order of the node tree (children before parents), loop joints and couplings last.
 fn elimination_order(
     nmoving: usize,
     joints: &[Joint],
@@ -241,6 +284,7 @@ fn elimination_order(
     joint_node: &[Option<usize>],
     nnodes: usize,
     leaves: &[usize],
+    couplings: &[usize],
 ) -> Vec<usize> {
     // parent node of every node in the elimination tree (None = root)
     let mut up: Vec<Option<usize>> = vec![None; nnodes];
@@ -262,7 +306,7 @@ fn elimination_order(
     let mut children: Vec<Vec<usize>> = vec![Vec::new(); nnodes];
     let mut roots = Vec::new();
     for (n, parent) in up.iter().enumerate() {
-        if loops.contains(&n) || leaves.contains(&n) {
+        if loops.contains(&n) || leaves.contains(&n) || couplings.contains(&n) {
             continue;
         }
         match *parent {
@@ -284,5 +328,6 @@ fn elimination_order(
         }
     }
     order.extend(loops);
+    order.extend(couplings);
     order
 }

@@ -78,6 +78,7 @@ pub(crate) fn prepare_forces(
         }
         ws.applied[b] = a;
     }
+    // Jacobians and spring forces first: actuator lengths and rates need every free Jacobian
     for (ji, joint) in model.joints.iter().enumerate() {
         let frame = JointFrame::new(joint, &pose(state, joint.parent), &pose(state, joint.child));
         let adr = model.topology.con_adr[ji];
@@ -86,14 +87,22 @@ pub(crate) fn prepare_forces(
         let fa = ws.free_adr[ji];
         frame.free_jacobian(joint, &mut ws.free_jac[fa..fa + 12 * nf]);
         let mut tau = [0.0; 6];
-        generalized_force(model, ji, &frame, ctrl, forces, &mut tau[..nf]);
-        let jf = &ws.free_jac[fa..fa + 12 * nf];
-        super::servo::add_servo_bias(model, state, ji, &frame, jf, &mut tau[..nf]);
+        generalized_force(model, ji, &frame, forces, &mut tau[..nf]);
+        ws.joint_tau[ji] = tau;
+    }
+    super::actuation::actuator_forces(model, state, ws, ctrl);
+    for (ji, joint) in model.joints.iter().enumerate() {
+        let nf = joint.nfree();
+        let mut tau = ws.joint_tau[ji];
+        super::actuation::add_joint_forces(model, ws, ji, &mut tau[..nf]);
         if tau[..nf].iter().any(|&t| t != 0.0) {
+            let fa = ws.free_adr[ji];
             let jf = &ws.free_jac[fa..fa + 12 * nf];
             add_jt_times(&mut ws.applied, joint, jf, &tau[..nf], h);
         }
     }
+    super::actuation::add_site_wrenches(model, state, ws);
+    super::coupling::prepare(model, state, ws);
     if model.topology.has_cones {
         super::inequality::prepare(model, state, ws);
     }
@@ -126,6 +135,9 @@ pub(crate) fn prepare(
                 .copy_from_slice(&state.joint_impulse[adr..adr + joint.ncon()]);
         }
     }
+    for &n in &model.topology.coupling_node {
+        ws.w[model.topology.pattern.offset(n)] = 0.0;
+    }
     if model.topology.has_cones {
         super::inequality::activate(model, state, ws);
         super::inequality::initialize(model, state, ws, model.options.warm_start);
@@ -144,12 +156,11 @@ fn restart_cold(model: &Model, state: &State, ws: &mut Workspace) {
     super::inequality::initialize(model, state, ws, false);
 }
 
-/// Spring + actuator + applied generalized force on the free dofs of joint `ji`.
+/// Spring + applied generalized force on the free dofs of joint `ji`.
 fn generalized_force(
     model: &Model,
     ji: usize,
     frame: &JointFrame,
-    ctrl: &[f64],
     forces: &AppliedForces,
     tau: &mut [f64],
 ) {
@@ -158,18 +169,6 @@ fn generalized_force(
         let mut coords = [0.0; 7];
         frame.coordinates(joint, &mut coords[..joint.nq()]);
         frame.spring_force(joint, &coords[..joint.nq()], tau);
-    }
-    for (a, act) in model
-        .actuators
-        .iter()
-        .enumerate()
-        .filter(|(_, a)| a.joint == ji)
-    {
-        let u = match act.ctrlrange {
-            Some((lo, hi)) => ctrl[a].clamp(lo, hi),
-            None => ctrl[a],
-        };
-        tau[act.dof] += act.gear * act.gain * u;
     }
     if let (Some(q), false) = (forces.qfrc, joint.is_loop) {
         for (i, t) in tau.iter_mut().enumerate() {
@@ -319,6 +318,9 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
             super::armature::add_armature_residual(model, state, joint, jf, w, residual);
         }
     }
+    if !model.couplings.is_empty() {
+        super::coupling::add_rows(model, ws, w, residual);
+    }
 }
 
 /// ∞-norm that propagates NaN (`f64::max` alone would drop it).
@@ -384,6 +386,7 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace) {
     for (ji, joint) in model.joints.iter().enumerate() {
         assemble_joint(model, ws, ji, joint, h);
     }
+    super::coupling::assemble(model, ws, h);
     if t.has_cones {
         let w = std::mem::take(&mut ws.w);
         super::inequality::assemble(model, ws, &w, h);
