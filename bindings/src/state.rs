@@ -85,7 +85,7 @@ impl PyState {
             ukemi_engine::mechanics::angular_momentum(&self.model, &self.inner).as_slice(),
         )
     }
-    /// Discrete total energy: kinetic + gravity + joint springs (J).
+    /// Discrete total energy: kinetic (bodies and joint armature) + gravity + joint springs (J).
     fn energy(&self) -> f64 {
         ukemi_engine::mechanics::total_energy(&self.model, &self.inner)
     }

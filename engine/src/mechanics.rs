@@ -63,7 +63,27 @@ pub fn total_energy(model: &Model, state: &State) -> f64 {
             -model.bodies[b].mass * g.dot(&(p - v * (0.5 * h)))
         })
         .sum();
-    kinetic_energy(model, state) + pe + spring_energy(model, state)
+    kinetic_energy(model, state) + pe + spring_energy(model, state) + armature_energy(model, state)
+}
+
+/// Kinetic energy of the joints' rotor inertia (MuJoCo's `armature`), `½ Σ a θ̇²` with the dof
+/// rates of the state's velocities (J); part of the discrete Lagrangian the integrator
+/// conserves (see `solver::armature`).
+pub fn armature_energy(model: &Model, state: &State) -> f64 {
+    if !model.joints.iter().any(|j| j.has_armature()) {
+        return 0.0;
+    }
+    let qvel = crate::joints::coordinates::qvel(model, state);
+    model
+        .joints
+        .iter()
+        .filter(|j| !j.is_loop && j.has_armature())
+        .map(|j| {
+            (0..j.nfree())
+                .map(|i| 0.5 * j.armature[i] * qvel[j.qvel_adr + i].powi(2))
+                .sum::<f64>()
+        })
+        .sum()
 }
 
 /// Potential energy stored in joint springs at the current configuration (J).
