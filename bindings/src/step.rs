@@ -48,6 +48,14 @@ impl From<StepReport> for PyStepInfo {
     }
 }
 
+/// A Python state of `model` wrapping `inner`.
+fn next_state(model: &PyModel, inner: ukemi_engine::State) -> PyState {
+    PyState {
+        model: model.inner.clone(),
+        inner,
+    }
+}
+
 fn same_model(model: &PyModel, state: &PyState) -> PyResult<()> {
     if state.model.topology_id() != model.inner.topology_id() {
         return Err(ModelMismatchError::new_err(
@@ -88,13 +96,7 @@ pub fn step(
             ukemi_engine::step_with(&m, &mut next, &mut ws, &ctrl, &forces)
         });
         let report = report.py()?;
-        Ok((
-            PyState {
-                model: model.inner.clone(),
-                inner: next,
-            },
-            report.into(),
-        ))
+        Ok((next_state(model, next), report.into()))
     })
 }
 
@@ -151,13 +153,7 @@ pub fn rollout<'py>(
         });
         result.py()?;
         let d = out.into_dict(py, nq, nv, nb)?;
-        Ok((
-            d,
-            PyState {
-                model: model.inner.clone(),
-                inner: s,
-            },
-        ))
+        Ok((d, next_state(model, s)))
     })
 }
 
@@ -280,14 +276,7 @@ pub fn solver_trace<'py>(
             PyArray1::from_vec(py, records.iter().map(|r| r.corrector).collect()),
         )?;
         out.set_item("condition", PyArray1::from_vec(py, column(|r| r.condition)))?;
-        Ok((
-            PyState {
-                model: model.inner.clone(),
-                inner: next,
-            },
-            report.into(),
-            out,
-        ))
+        Ok((next_state(model, next), report.into(), out))
     })
 }
 
@@ -310,12 +299,6 @@ pub fn step_smoothed(
         let mut next = state.inner.clone();
         let report = py.detach(|| ukemi_engine::step_smoothed(&m, &mut next, &ctrl, kappa));
         let report = report.py()?;
-        Ok((
-            PyState {
-                model: model.inner.clone(),
-                inner: next,
-            },
-            report.into(),
-        ))
+        Ok((next_state(model, next), report.into()))
     })
 }
