@@ -189,7 +189,7 @@ def test_timestep_and_frame_skip_keywords():
     assert env.model.timestep == 0.004 and env.dt == pytest.approx(0.008)
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(3, np.float32))
-    assert info["solver_status"] == "converged"
+    assert info["solver_status"] in ukemi.SUCCESS_STATUSES
 
 
 def _mean_return(model, env, episodes, seed):
@@ -365,7 +365,7 @@ def test_humanoid_qfrc_actuator_and_contact_wrench():
     action = np.linspace(-0.05, 0.05, 17).astype(np.float32)
     for _ in range(25):  # feet on the floor by then
         _, _, term, trunc, info = env.step(action)
-        assert not (term or trunc) and info["solver_status"] == "converged"
+        assert not (term or trunc) and info["solver_status"] in ukemi.SUCCESS_STATUSES
     qfrc = env._get_obs()[45 + 130 + 78 : 45 + 130 + 78 + 17]
     gear = np.asarray(env.model.actuator_gear)
     # humanoid.xml lists the abdomen motors y, z, x; MuJoCo's dofs are z, y, x
@@ -430,7 +430,7 @@ def test_quadruped_stands_and_terminates_when_fallen():
     total, x_start = 0.0, env.qpos[0]
     for _ in range(25):  # zero action holds the stand pose
         _, r, term, trunc, info = env.step(np.zeros(12, np.float32))
-        assert not term and info["solver_status"] == "converged"
+        assert not term and info["solver_status"] in ukemi.SUCCESS_STATUSES
         total += r
     # healthy every step, no control cost; the forward terms telescope to displacement / dt
     assert total == pytest.approx(25.0 + (env.qpos[0] - x_start) / env.dt, abs=1e-9)
@@ -458,7 +458,7 @@ def test_task_reward_equals_env_reward(name):
     for _ in range(3):
         x, a = env.state_vector(), 0.5 * env.action_space.sample()
         _, r, term, _, info = env.step(a)
-        assert info["solver_status"] == "converged"
+        assert info["solver_status"] in ukemi.SUCCESS_STATUSES
         x1, u = env.state_vector(), np.asarray(a, np.float64)
         assert float(tj.reward(jnp.asarray(x), jnp.asarray(u), jnp.asarray(x1))) == pytest.approx(r, abs=1e-12)
         rt = tt.reward(torch.as_tensor(x), torch.as_tensor(u), torch.as_tensor(x1))

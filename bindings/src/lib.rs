@@ -41,15 +41,11 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
         .map(|k| k.name())
         .collect();
     m.add("JOINT_KINDS", kinds)?;
-    m.add(
-        "STATUS_NAMES",
-        [
-            "converged",
-            "max_iterations",
-            "line_search_failed",
-            "non_finite",
-        ],
-    )?;
+    let statuses: Vec<&str> = ukemi_engine::SolveStatus::ALL
+        .iter()
+        .map(|s| s.name())
+        .collect();
+    m.add("STATUS_NAMES", statuses)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

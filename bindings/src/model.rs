@@ -400,15 +400,23 @@ impl PyModel {
     }
     /// Solver options as a dict.
     #[getter]
-    fn options(&self) -> Vec<(&'static str, f64)> {
+    fn options(&self) -> std::collections::HashMap<&'static str, f64> {
         let o = &self.inner.options;
-        vec![
+        [
             ("timestep", o.timestep),
             ("rtol", o.rtol),
+            ("kappa_tol", o.kappa_tol),
+            ("acceptable_rtol", o.acceptable_rtol),
+            ("acceptable_kappa_tol", o.acceptable_kappa_tol),
             ("max_iter", o.max_iter as f64),
             ("max_ls", o.max_ls as f64),
+            ("undercut", o.undercut),
             ("regularization", o.regularization),
+            ("activation_margin", o.activation_margin),
+            ("kappa_grad", o.kappa_grad.unwrap_or(0.0)),
         ]
+        .into_iter()
+        .collect()
     }
     #[getter]
     fn body_mass<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
@@ -442,7 +450,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -450,6 +458,8 @@ impl PyModel {
         gravity: Option<[f64; 3]>,
         rtol: Option<f64>,
         kappa_tol: Option<f64>,
+        acceptable_rtol: Option<f64>,
+        acceptable_kappa_tol: Option<f64>,
         max_iter: Option<usize>,
         max_ls: Option<usize>,
         undercut: Option<f64>,
@@ -468,6 +478,8 @@ impl PyModel {
             o.max_ls = max_ls.unwrap_or(o.max_ls);
             o.regularization = regularization.unwrap_or(o.regularization);
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);
+            o.acceptable_rtol = acceptable_rtol.unwrap_or(o.acceptable_rtol);
+            o.acceptable_kappa_tol = acceptable_kappa_tol.unwrap_or(o.acceptable_kappa_tol);
             o.undercut = undercut.unwrap_or(o.undercut);
             o.warm_start = warm_start.unwrap_or(o.warm_start);
             o.nt_scaling = nt_scaling.unwrap_or(o.nt_scaling);

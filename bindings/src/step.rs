@@ -12,7 +12,7 @@ use crate::state::PyState;
 #[pyclass(name = "StepInfo", module = "ukemi._ukemi", frozen, get_all)]
 #[derive(Clone)]
 pub struct PyStepInfo {
-    /// "converged" | "max_iterations" | "line_search_failed" | "non_finite".
+    /// "converged" | "acceptable" | "max_iterations" | "line_search_failed" | "non_finite".
     pub status: &'static str,
     /// Newton iterations.
     pub iterations: usize,
@@ -24,10 +24,11 @@ pub struct PyStepInfo {
 
 #[pymethods]
 impl PyStepInfo {
-    /// Whether the solve converged.
+    /// Whether the state is valid: the solve converged, or reached the acceptable tolerances
+    /// (status "acceptable").
     #[getter]
     fn converged(&self) -> bool {
-        self.status == "converged"
+        matches!(self.status, "converged" | "acceptable")
     }
     fn __repr__(&self) -> String {
         format!(

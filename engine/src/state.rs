@@ -168,8 +168,15 @@ impl State {
 /// How a solve ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SolveStatus {
-    /// Residual below `rtol`.
+    /// Residual below `rtol` (and complementarity below `kappa_tol`).
     Converged,
+    /// The iteration stalled (line search or `max_iter`) before reaching `rtol`/`kappa_tol`,
+    /// at an iterate within `acceptable_rtol`/`acceptable_kappa_tol` (IPOPT's "solved to
+    /// acceptable level"): round-off in an ill-conditioned Newton matrix, typically a
+    /// statically indeterminate contact set, keeps the tight tolerances out of reach. A
+    /// success: the state is valid to the acceptable tolerances, which `residual` and
+    /// `complementarity` report.
+    Acceptable,
     /// `max_iter` reached first.
     MaxIterations,
     /// No step length reduced the residual.
@@ -183,14 +190,27 @@ impl SolveStatus {
     pub fn name(self) -> &'static str {
         match self {
             SolveStatus::Converged => "converged",
+            SolveStatus::Acceptable => "acceptable",
             SolveStatus::MaxIterations => "max_iterations",
             SolveStatus::LineSearchFailed => "line_search_failed",
             SolveStatus::NonFinite => "non_finite",
         }
     }
-    /// Small integer code (0 = converged), for status arrays.
+    /// Small integer code (0 = converged, 1 = acceptable, larger = failure), for status arrays.
     pub fn code(self) -> u8 {
         self as u8
+    }
+    /// Every status in code order.
+    pub const ALL: [SolveStatus; 5] = [
+        SolveStatus::Converged,
+        SolveStatus::Acceptable,
+        SolveStatus::MaxIterations,
+        SolveStatus::LineSearchFailed,
+        SolveStatus::NonFinite,
+    ];
+    /// Whether the step's state is valid: converged, or solved to the acceptable level.
+    pub fn is_success(self) -> bool {
+        matches!(self, SolveStatus::Converged | SolveStatus::Acceptable)
     }
 }
 
@@ -239,6 +259,8 @@ pub struct Workspace {
     pub(crate) matrix: BlockMatrix,
     /// Newton unknowns `[v⁺, ω⁺ per moving body; λ per constraint row]`, node layout.
     pub(crate) w: Vec<f64>,
+    /// The best acceptable iterate of a failed attempt, kept while retries try to converge.
+    pub(crate) w_acceptable: Vec<f64>,
     pub(crate) w_trial: Vec<f64>,
     pub(crate) residual: Vec<f64>,
     pub(crate) delta: Vec<f64>,
@@ -346,6 +368,7 @@ impl Workspace {
             matrix: BlockMatrix::new(&t.pattern),
             w: vec![0.0; n],
             w_trial: vec![0.0; n],
+            w_acceptable: vec![0.0; n],
             residual: vec![0.0; n],
             delta: vec![0.0; n],
             applied: vec![[0.0; 6]; nb],

@@ -118,7 +118,7 @@ pub fn rollout(
     for k in 0..nstep {
         let report = step(model, state, ws, &ctrls[k * nu..(k + 1) * nu])?;
         record(k, state, &report);
-        if stop_on_failure && report.status != crate::SolveStatus::Converged {
+        if stop_on_failure && !report.status.is_success() {
             break;
         }
     }

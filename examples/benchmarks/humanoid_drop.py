@@ -32,7 +32,7 @@ def main(rates):
         t0, fails, least = time.perf_counter(), 0, np.inf
         for _ in range(hz):
             s, info = ukemi.step(m, s, np.zeros(m.nu), on_failure="return")
-            fails += info.status != "converged"
+            fails += not info.converged
             least = min(least, ukemi.signed_distances(m, s).min())
         print(f"{hz:5d} Hz: {hz} steps, {fails} unconverged, least signed distance {least:.2e} m, "
               f"{time.perf_counter() - t0:.1f} s", flush=True)

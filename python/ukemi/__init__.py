@@ -20,8 +20,8 @@ from . import _ukemi, models
 from ._builder import JOINT_KINDS, ModelBuilder
 from ._loaders import gymnasium_asset_path, load
 from ._gradients import StepJacobians, rollout_vjp, step_jacobians, step_jvp, step_vjp
-from ._simulate import (STATUS_NAMES, Trajectory, rollout, signed_distances, solver_trace, step,
-                        step_smoothed)
+from ._simulate import (STATUS_NAMES, SUCCESS_STATUSES, Trajectory, rollout, signed_distances,
+                        solver_trace, step, step_smoothed)
 from ._ukemi import Model, State, StepInfo, get_num_threads, set_num_threads
 from .errors import (
     ConvergenceError,
@@ -41,6 +41,7 @@ __version__: str = _ukemi.__version__
 __all__ = [
     "JOINT_KINDS",
     "STATUS_NAMES",
+    "SUCCESS_STATUSES",
     "ConvergenceError",
     "InputError",
     "InternalError",

@@ -11,6 +11,10 @@ from ._convert import as_float_array
 from .errors import ConvergenceError
 
 STATUS_NAMES: tuple[str, ...] = tuple(_ukemi.STATUS_NAMES)
+#: statuses whose state is valid: "converged", and "acceptable" (the solve stalled on round-off
+#: within the options' acceptable_rtol / acceptable_kappa_tol)
+SUCCESS_STATUSES: tuple[str, ...] = ("converged", "acceptable")
+SUCCESS = SUCCESS_STATUSES
 _ON_FAILURE = ("raise", "return")
 
 
@@ -52,7 +56,7 @@ def step(model, state, ctrl=None, *, qfrc_applied=None, xfrc_applied=None, on_fa
     qfrc = None if qfrc_applied is None else as_float_array("qfrc_applied", qfrc_applied, (model.nv,))
     xfrc = None if xfrc_applied is None else as_float_array("xfrc_applied", xfrc_applied, (model.nbody, 6))
     next_state, info = _ukemi._step(model, state, ctrl, qfrc, xfrc)
-    if on_failure == "raise" and info.status != "converged":
+    if on_failure == "raise" and info.status not in SUCCESS:
         raise ConvergenceError(
             f"step at t = {state.time:.6g} did not converge: {info.status} after "
             f"{info.iterations} iterations, residual {info.residual:.3e}",
@@ -122,8 +126,8 @@ class Trajectory:
 
     @property
     def converged(self) -> bool:
-        """Whether every step converged."""
-        return bool(np.all(self.status == "converged"))
+        """Whether every step's state is valid (status "converged" or "acceptable")."""
+        return bool(np.all(np.isin(self.status, SUCCESS)))
 
 
 def signed_distances(model, state) -> np.ndarray:
@@ -169,7 +173,7 @@ def rollout(model, state, ctrls=None, *, nsteps=None, on_failure="raise") -> Tra
     traj = Trajectory(arrays["qpos"], arrays["qvel"], arrays["time"], arrays["body_pos"],
                       arrays["body_quat"], arrays["min_distance"], status, arrays["iterations"], arrays["residual"], final)
     if on_failure == "raise" and not traj.converged:
-        k = int(np.argmax(status != "converged"))
+        k = int(np.argmax(~np.isin(status, SUCCESS)))
         raise ConvergenceError(
             f"rollout step {k} (t = {traj.time[k]:.6g}) did not converge: {status[k]}, "
             f"residual {traj.residual[k]:.3e}", state=final, step_index=k)

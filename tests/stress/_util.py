@@ -28,7 +28,7 @@ def energies(model, traj) -> np.ndarray:
 
 
 def failure_summary(traj) -> str:
-    bad = traj.status != "converged"
+    bad = ~np.isin(traj.status, ukemi.SUCCESS_STATUSES)
     if not bad.any():
         return "all converged"
     kinds = {str(k): int(np.sum(traj.status == k)) for k in set(traj.status[bad])}

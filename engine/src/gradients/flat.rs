@@ -214,7 +214,7 @@ pub fn env_step(model: &Model, x: &[f64], u: &[f64], nstep: usize) -> Result<Env
         crate::step::validate_inputs(model, &prev, &ws, u, &AppliedForces::default())?;
         newton::prepare(model, &prev, &mut ws, u, &AppliedForces::default());
         let report = newton::solve(model, &prev, &mut ws);
-        if report.status != SolveStatus::Converged {
+        if !report.status.is_success() {
             return Ok(failed(report.status));
         }
         s = prev.clone();

@@ -167,17 +167,14 @@ fn solve_for_gradient(
     validate_inputs(model, state, &ws, ctrl, &AppliedForces::default())?;
     newton::prepare(model, state, &mut ws, ctrl, &AppliedForces::default());
     let report = newton::solve(model, state, &mut ws);
-    ensure!(
-        report.status == SolveStatus::Converged,
-        not_converged("step", report)
-    );
+    ensure!(report.status.is_success(), not_converged("step", report));
     let mut next = state.clone();
     newton::write_state(model, &mut next, &ws);
     let central = match kappa {
         Some(k) if model.topology.has_cones => {
             let c = ipm::solve_central(model, state, &mut ws, k);
             ensure!(
-                c.status == SolveStatus::Converged,
+                c.status.is_success(),
                 not_converged(&format!("central-path point at kappa_grad = {k:e}"), c)
             );
             Some(c)

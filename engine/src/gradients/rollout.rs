@@ -4,7 +4,7 @@ use super::tangent::{Coordinates, Point};
 use super::{Linearization, Wrt, not_converged};
 use crate::model::Model;
 use crate::solver::newton;
-use crate::state::{SolveStatus, State, Workspace};
+use crate::state::{State, Workspace};
 use crate::step::AppliedForces;
 use crate::{Error, Result, ensure};
 
@@ -33,7 +33,7 @@ pub(crate) fn advance(
     newton::prepare(model, &s, ws, ctrl, &AppliedForces::default());
     let report = newton::solve(model, &s, ws);
     ensure!(
-        report.status == SolveStatus::Converged,
+        report.status.is_success(),
         not_converged("rollout step", report)
     );
     newton::write_state(model, &mut s, ws);

@@ -20,6 +20,14 @@ pub struct Options {
     /// `kappa_tol / γ` above the surface, and a box held by static friction creeps at a speed
     /// proportional to it. Default 1e-11.
     pub kappa_tol: f64,
+    /// Acceptable residual: when the iteration stalls (no step length decreases the merit, or
+    /// `max_iter` is reached) at an iterate whose residual is below this and whose
+    /// complementarity is below `acceptable_kappa_tol`, the step ends with status
+    /// `Acceptable` (a success) instead of a failure. The gap rows are residual rows, so this
+    /// also bounds the penetration of an acceptable step. 0 turns acceptance off. Default 1e-8.
+    pub acceptable_rtol: f64,
+    /// Acceptable complementarity violation (see `acceptable_rtol`). Default 1e-8.
+    pub acceptable_kappa_tol: f64,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
     /// Start contact and limit variables from the previous step's solution (pushed
@@ -67,6 +75,8 @@ impl Default for Options {
             max_ls: 10,
             regularization: 1e-12,
             kappa_tol: 1e-11,
+            acceptable_rtol: 1e-8,
+            acceptable_kappa_tol: 1e-8,
             undercut: 10.0,
             warm_start: true,
             warm_start_margin: 1e-6,
@@ -95,6 +105,16 @@ impl Options {
             self.rtol.is_finite() && self.rtol > 0.0,
             Error::model("rtol", self.rtol, "must be finite and > 0")
         );
+        for (name, tol) in [
+            ("kappa_tol", self.kappa_tol),
+            ("acceptable_rtol", self.acceptable_rtol),
+            ("acceptable_kappa_tol", self.acceptable_kappa_tol),
+        ] {
+            ensure!(
+                tol.is_finite() && tol >= 0.0,
+                Error::model(name, tol, "must be finite and >= 0")
+            );
+        }
         ensure!(
             self.max_iter >= 1,
             Error::model("max_iter", self.max_iter, "must be >= 1")

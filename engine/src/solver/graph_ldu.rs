@@ -354,6 +354,11 @@ pub struct BlockMatrix {
     scratch: Vec<f64>,
     /// Nodes left out of the factorisation and the solves (see [`Self::set_skipped`]).
     skip: Vec<bool>,
+    /// Copy of `values` as assembled, taken by [`factor`](Self::factor) for the residuals of
+    /// [`solve_refined`](Self::solve_refined).
+    assembled: Vec<f64>,
+    /// Three node-ordered scratch vectors for [`solve_refined`](Self::solve_refined).
+    refine: [Vec<f64>; 3],
 }
 
 impl BlockMatrix {
@@ -364,6 +369,8 @@ impl BlockMatrix {
             pivots: vec![0; p.total_dim()],
             scratch: vec![0.0; p.max_dim()],
             skip: vec![false; p.nnodes()],
+            assembled: vec![0.0; p.nvalues()],
+            refine: std::array::from_fn(|_| vec![0.0; p.total_dim()]),
         }
     }
 
@@ -406,23 +413,71 @@ impl BlockMatrix {
     ///
     /// Only meaningful before [`factor`](Self::factor), which overwrites the values.
     pub fn matvec(&self, p: &BlockPattern, x: &[f64], y: &mut [f64]) {
-        y.fill(0.0);
-        for i in 0..p.nnodes() {
-            let (oi, di) = (p.offset(i), p.dim(i));
-            for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
-                let (j, off) = (p.cols[idx], p.vals[idx]);
-                let xj = &x[p.offset(j)..p.offset(j) + p.dim(j)];
-                // y_i += A_ij x_j
-                gemv_add(&mut y[oi..oi + di], &self.values[off..], xj, di, p.dim(j));
-            }
-        }
+        block_matvec(p, &self.values, x, y);
     }
 
+    /// Solve `A x = b` in place like [`solve`](Self::solve), then improve `x` by up to
+    /// `rounds` steps of iterative refinement (`x += A⁻¹(b - A x)` with the residual taken
+    /// against the matrix as assembled), stopping when the residual no longer shrinks.
+    ///
+    /// Why: near the end of an interior-point solve the Newton matrix of a contact step has
+    /// condition numbers of 1e10-1e14 and the block elimination pivots only inside blocks, so
+    /// a plain solve can return a direction that does not decrease the merit function at all;
+    /// one or two refinement steps restore a direction accurate to the conditioning of the
+    /// problem at the cost of a mat-vec and a back-substitution each.
+    pub fn solve_refined(&mut self, p: &BlockPattern, b: &mut [f64], rounds: usize) {
+        let [mut rhs, mut res, mut step] = std::mem::take(&mut self.refine);
+        rhs.copy_from_slice(b);
+        self.solve(p, b);
+        let mut last = f64::INFINITY;
+        for round in 0..=rounds {
+            // res = rhs - A x
+            block_matvec(p, &self.assembled, b, &mut res);
+            let mut norm = 0.0f64;
+            for (r, f) in res.iter_mut().zip(&rhs) {
+                *r = f - *r;
+                norm = norm.max(r.abs());
+            }
+            if !(norm < 0.5 * last) {
+                if round > 0 && !(norm < last) {
+                    // the last correction did not help: take it back
+                    b.iter_mut().zip(&step).for_each(|(x, d)| *x -= d);
+                }
+                break;
+            }
+            if round == rounds || norm == 0.0 {
+                break;
+            }
+            last = norm;
+            step.copy_from_slice(&res);
+            self.solve(p, &mut step);
+            b.iter_mut().zip(&step).for_each(|(x, d)| *x += d);
+        }
+        self.refine = [rhs, res, step];
+    }
+}
+
+/// `y = A x` for the block values `values` laid out by pattern `p`.
+fn block_matvec(p: &BlockPattern, values: &[f64], x: &[f64], y: &mut [f64]) {
+    y.fill(0.0);
+    for i in 0..p.nnodes() {
+        let (oi, di) = (p.offset(i), p.dim(i));
+        for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
+            let (j, off) = (p.cols[idx], p.vals[idx]);
+            let xj = &x[p.offset(j)..p.offset(j) + p.dim(j)];
+            // y_i += A_ij x_j
+            gemv_add(&mut y[oi..oi + di], &values[off..], xj, di, p.dim(j));
+        }
+    }
+}
+
+impl BlockMatrix {
     /// In-place block LU factorisation in the pattern's elimination order.
     ///
     /// Returns `Err(node)` if the (Schur-complemented) diagonal block of `node` is singular
     /// or not finite; the values are then partially factored and must be reassembled.
     pub fn factor(&mut self, p: &BlockPattern) -> Result<(), usize> {
+        self.assembled.copy_from_slice(&self.values);
         for s in &p.steps {
             if self.skip[s.node] {
                 continue;
@@ -739,6 +794,41 @@ mod tests {
             let (p, m) = multibody(7, 2, &mut rng);
             check(&p, m, &mut rng);
         }
+    }
+
+    /// Iterative refinement: on badly scaled saddle systems (bodies with masses 1e-6..1e6, the
+    /// spread of a 1:1000 stack's Newton matrix) the refined solution's residual is at round-off
+    /// and never worse than the plain solve's.
+    #[test]
+    fn refinement_reduces_residual_of_badly_scaled_systems() {
+        let mut rng = Rng(7);
+        let (mut worst_plain, mut worst_refined) = (0.0f64, 0.0f64);
+        for trial in 0..20 {
+            let (p, mut m) = multibody(8, 1, &mut rng);
+            for b in 0..8 {
+                let scale = 10f64.powi((b as i32 + trial) % 13 - 6);
+                m.block_mut(&p, b, b).unwrap().iter_mut().for_each(|v| *v *= scale);
+            }
+            let orig = m.clone();
+            m.factor(&p).unwrap();
+            let n = p.total_dim();
+            let b = rng.vec(n);
+            let (mut plain, mut refined) = (b.clone(), b.clone());
+            m.solve(&p, &mut plain);
+            m.solve_refined(&p, &mut refined, 2);
+            let mut ax = vec![0.0; n];
+            orig.matvec(&p, &plain, &mut ax);
+            let r_plain = rel(&ax, &b);
+            orig.matvec(&p, &refined, &mut ax);
+            let r_refined = rel(&ax, &b);
+            worst_plain = worst_plain.max(r_plain);
+            assert!(r_refined <= r_plain * 1.0001 + 1e-15, "{r_refined} > {r_plain}");
+            worst_refined = worst_refined.max(r_refined);
+        }
+        eprintln!("worst relative residual: plain {worst_plain:.1e}, refined {worst_refined:.1e}");
+        // the scaling does hurt the plain solve, and refinement recovers most of it
+        assert!(worst_plain > 1e-12, "plain residual {worst_plain}");
+        assert!(worst_refined < 0.1 * worst_plain);
     }
 
     #[test]

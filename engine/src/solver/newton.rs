@@ -506,7 +506,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     // the step again with it active (rare: the activation reach already covers twice the
     // current speeds). A few rounds at most; the last one has every candidate active.
     for round in 0..3 {
-        if report.status != SolveStatus::Converged {
+        if !report.status.is_success() {
             break;
         }
         let missed = super::inequality::missed_contacts(model, ws);
@@ -540,7 +540,9 @@ fn restart_warm(model: &Model, state: &State, ws: &mut Workspace) {
 /// The interior-point solve with the current activation; on failure retried cold, then cold
 /// with unscaled friction-cone rows (each rescues steps the others stall on: a warm start sits
 /// on the previous solution's cone boundary, poor when contacts change state; the scaled and
-/// unscaled directions stall in different degenerate configurations).
+/// unscaled directions stall in different degenerate configurations). An attempt that stalls
+/// at an acceptable iterate still lets the retries try for full convergence; if they fail, the
+/// acceptable iterate is the result.
 fn solve_active(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
     let mut report = super::ipm::solve(model, state, ws);
     let retries: &[bool] = match (model.options.warm_start, model.options.nt_scaling) {
@@ -548,18 +550,30 @@ fn solve_active(model: &Model, state: &State, ws: &mut Workspace) -> StepReport 
         (true, false) | (false, true) => &[false],
         (false, false) => &[],
     };
+    let mut acceptable: Option<StepReport> = None;
+    let mut iterations = report.iterations;
     for &scaled in retries {
         if report.status == SolveStatus::Converged {
             break;
         }
+        if report.status == SolveStatus::Acceptable && acceptable.is_none() {
+            ws.w_acceptable.copy_from_slice(&ws.w);
+            acceptable = Some(report);
+        }
         restart_cold(model, state, ws);
         ws.attempt += 1;
         ws.nt_disabled = !scaled;
-        let mut next = super::ipm::solve(model, state, ws);
+        report = super::ipm::solve(model, state, ws);
         ws.nt_disabled = false;
-        next.iterations += report.iterations;
-        report = next;
+        iterations += report.iterations;
     }
+    if let Some(best) = acceptable.filter(|_| !report.status.is_success()) {
+        std::mem::swap(&mut ws.w, &mut ws.w_acceptable);
+        // recompute the derived quantities (next poses, residual) of the restored iterate
+        evaluate(model, state, ws, false, 0.0);
+        report = best;
+    }
+    report.iterations = iterations;
     report
 }
 
@@ -590,7 +604,11 @@ fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport 
         for (d, r) in ws.delta.iter_mut().zip(ws.residual.iter()) {
             *d = -r;
         }
-        ws.matrix.solve(&model.topology.pattern, &mut ws.delta);
+        ws.matrix.solve_refined(
+            &model.topology.pattern,
+            &mut ws.delta,
+            super::ipm::REFINE_ROUNDS,
+        );
         let mut alpha = spin_limited_step(model, ws);
         let mut accepted = false;
         for _ in 0..=opts.max_ls {
@@ -614,6 +632,12 @@ fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport 
         if it + 1 == opts.max_iter && norm <= opts.rtol {
             report.status = SolveStatus::Converged;
         }
+    }
+    if !report.status.is_success()
+        && report.status != SolveStatus::NonFinite
+        && norm < opts.acceptable_rtol
+    {
+        report.status = SolveStatus::Acceptable;
     }
     report.residual = norm;
     report

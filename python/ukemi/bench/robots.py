@@ -60,7 +60,7 @@ def run_ukemi(model, ctrls: np.ndarray, grad_steps: int) -> dict:
     t0 = time.perf_counter()
     tr = ukemi.rollout(model, s0, ctrls, on_failure="return")
     wall = time.perf_counter() - t0
-    bad = tr.status != "converged"
+    bad = ~np.isin(tr.status, ukemi.SUCCESS_STATUSES)
     grad_wall, grad_failed = 0.0, 0
     for k in range(grad_steps):
         s = model.make_state(qpos=tr.qpos[k], qvel=tr.qvel[k])

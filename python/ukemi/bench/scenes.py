@@ -145,7 +145,7 @@ def run_humanoid(engine: str, variant: str, dt: float, tol: float | None, durati
         least = np.array([ukemi.signed_distances(m, m.make_state(qpos=qp))[floor].min()
                           for qp in tr.qpos])
         out = _drop_metrics(tr.time, least, tr.body_pos[:, torso, 2], 0.5 * duration)
-        out["fail_t"] = tr.time[:-1][tr.status != "converged"]
+        out["fail_t"] = tr.time[:-1][~np.isin(tr.status, ukemi.SUCCESS_STATUSES)]
         return {**out, **_solver_stats(tr), "wall": wall, "sim": n * dt}
     mj = _mujoco()
     m = mj.MjModel.from_xml_path(str(path or ukemi.gymnasium_asset_path("humanoid")))
@@ -272,8 +272,8 @@ def _mj_angmom(d) -> np.ndarray:
 # ----------------------------------------------------------------------------- helpers
 def _solver_stats(tr) -> dict:
     return {"iters": float(np.mean(tr.iterations)) if len(tr.iterations) else 0.0,
-            "failed": int(np.sum(tr.status != "converged")), "steps": int(len(tr.status)),
-            "fail_kinds": sorted({str(s) for s in tr.status if s != "converged"})}
+            "failed": int(np.sum(~np.isin(tr.status, ukemi.SUCCESS_STATUSES))), "steps": int(len(tr.status)),
+            "fail_kinds": sorted({str(s) for s in tr.status if s not in ukemi.SUCCESS_STATUSES})}
 
 
 def _mj_least(d, floor: int | None = None) -> float:

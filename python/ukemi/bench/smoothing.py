@@ -116,7 +116,7 @@ class Point:
         s = perturb(model, self.state, d) if d.any() else self.state
         if kappa is None:
             nxt, info = ukemi.step(model, s, self.ctrl + du, on_failure="return")
-            return nxt, info.status == "converged"
+            return nxt, info.converged
         try:
             return ukemi.step_smoothed(model, s, self.ctrl + du, kappa=kappa)[0], True
         except ukemi.ConvergenceError:

@@ -38,6 +38,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from .._simulate import SUCCESS
 from . import _render
 from ._assets import asset_path, load_model, mjcf_info, rotate
 from ._physics import simulate
@@ -223,7 +224,7 @@ class UkemiMujocoEnv(gymnasium.Env):
 
     def _after_physics(self, action: np.ndarray, before: Any, x_next: np.ndarray, status: str,
                        contact_force: np.ndarray, body_wrench: np.ndarray):
-        if status != "converged":
+        if status not in SUCCESS:
             if self.warn_on_solver_failure:
                 warnings.warn(f"{type(self).__name__}: the solve failed ({status}) at t-step of "
                               f"{self.dt:g} s; episode truncated at the last converged state",
