@@ -54,7 +54,10 @@ fn unreachable_tolerance_ends_acceptable_within_the_acceptable_bounds() {
         assert!(status.is_success(), "{status:?}");
         if status == SolveStatus::Acceptable {
             assert!(residual < o.acceptable_rtol && complementarity < o.acceptable_kappa_tol);
-            assert!(residual >= o.rtol, "an acceptable step reports its true residual");
+            assert!(
+                residual >= o.rtol,
+                "an acceptable step reports its true residual"
+            );
         }
     }
     // the acceptable trajectory is the converged one to the acceptable tolerance
