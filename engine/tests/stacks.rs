@@ -94,13 +94,11 @@ fn high_and_zero_friction() {
     assert!(r.min_distance >= -1e-8);
 }
 
-/// Known failure (issue #3, open): a 1000 kg box resting on a 1 kg box. The interior-point
-/// solve stalls near convergence (line-search failure with residual ~1e-10 and complementarity
-/// ~1e-9) on about 10% of the steps at the default tolerances; the unscaled second-order-cone
-/// Newton system is badly conditioned when impulses differ by 10³ between neighbouring contacts.
-/// Nesterov-Todd scaling of the cone blocks is the planned fix.
+/// A 1000 kg box resting on a 1 kg box, 1000 steps: every step converges (formerly ~10% of the
+/// steps stalled near convergence with residual ~1e-10: the Newton system is badly conditioned
+/// when impulses differ by 10³ between neighbouring contacts; iterative refinement of the
+/// Newton directions fixed it).
 #[test]
-#[ignore = "issue #3: heavy-on-light 1000:1 stack stalls the IPM at default tolerances"]
 fn heavy_on_light_1000_to_1_stack() {
     let (r, drift) = stack(&[1.0, 1000.0], 0.8, 0.01, 1000);
     assert!(r.min_distance >= -1e-8 && drift < 1e-6 && r.final_speed < 1e-6);
