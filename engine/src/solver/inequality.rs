@@ -12,7 +12,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::contact::cone::{NtScaling, arrow, orthant_step, soc_product, soc_step};
-use crate::contact::{ContactFrame, ContactModel, witness};
+use crate::contact::{ContactFrame, ContactModel, witness_frozen};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::model::Model;
 use crate::model::topology_body_node as body_node;
@@ -119,11 +119,32 @@ pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm:
     // other node entries (the ψ-slack pairs are covered above; nothing else is free)
 }
 
-/// Contact frames at the current configuration (impulse directions, tangential velocity map).
+/// Contact frames at the current configuration (impulse directions, tangential velocity map),
+/// and the rim points of near-flat disk candidates, frozen for the step
+/// ([`crate::contact::disk_rim_for_step`]).
 pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
+    let h = model.options.timestep;
+    let predicted = |b: usize| {
+        if b == 0 {
+            return Pose::world();
+        }
+        let (p, (v, w)) = (state.pose(b), state.velocity(b));
+        Pose {
+            pos: p.pos + h * v,
+            quat: p.quat * crate::math::quat::step_map(&w, h),
+        }
+    };
     for (c, contact) in model.contacts.iter().enumerate() {
-        let (w, pa, pb) = witness(contact, &model.geoms, pose);
+        let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
+        ws.disk_rim[c] = crate::contact::disk_rim_for_step(
+            contact,
+            &model.geoms,
+            &predicted(ga.body),
+            &predicted(gb.body),
+            false,
+        );
+        let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.disk_rim[c]);
         ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);
     }
 }
@@ -196,11 +217,45 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
             continue;
         }
         let next = &ws.next_pose;
-        let (wit, _, _) = witness(contact, &model.geoms, |x| {
-            if x == 0 { Pose::world() } else { next[x] }
-        });
+        let (wit, _, _) = witness_frozen(
+            contact,
+            &model.geoms,
+            |x| if x == 0 { Pose::world() } else { next[x] },
+            ws.disk_rim[c],
+        );
         if wit.phi.is_nan() || wit.phi <= floor {
             ws.active[c] = true;
+            n += 1;
+        }
+    }
+    n
+}
+
+/// Penetration (m) of the exact disk rim that a solve with frozen rim points may leave before
+/// the rim points are re-frozen at the solved pose and the step solved again.
+const DISK_REFREEZE_TOL: f64 = 1e-10;
+
+/// After a solve: every frozen disk–plane candidate whose exact lowest rim point at the new
+/// configuration is below `-DISK_REFREEZE_TOL` is re-frozen at that point (the velocity change
+/// of the step moved the lowest point away from the predicted one); returns how many were (the
+/// step must then be solved again).
+pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
+    let mut n = 0;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        if ws.disk_rim[c].is_none() || !ws.active[c] {
+            continue;
+        }
+        let next = |x: usize| {
+            if x == 0 {
+                Pose::world()
+            } else {
+                ws.next_pose[x]
+            }
+        };
+        let (exact, pa, pb) = witness_frozen(contact, &model.geoms, next, None);
+        if exact.phi < -DISK_REFREEZE_TOL {
+            ws.disk_rim[c] =
+                crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true);
             n += 1;
         }
     }
@@ -240,15 +295,20 @@ pub(crate) fn evaluate(
             continue;
         }
         let [a, b] = t.contact_bodies[c];
-        let (wit, pa, pb) = witness(contact, &model.geoms, |x| {
-            if x == a {
-                next(ws, a)
-            } else if x == b {
-                next(ws, b)
-            } else {
-                Pose::world()
-            }
-        });
+        let (wit, pa, pb) = witness_frozen(
+            contact,
+            &model.geoms,
+            |x| {
+                if x == a {
+                    next(ws, a)
+                } else if x == b {
+                    next(ws, b)
+                } else {
+                    Pose::world()
+                }
+            },
+            ws.disk_rim[c],
+        );
         let frame = ContactFrame::new(&wit, &pa, &pb);
         ws.contact_phi[c] = wit.phi;
         ws.contact_dphi[c] = frame.jac[0];

@@ -504,12 +504,15 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     // Candidates left out of the step must not have been reached by it: check each at the new
     // configuration; if the step brought one within a quarter of the activation margin, solve
     // the step again with it active (rare: the activation reach already covers twice the
-    // current speeds). A few rounds at most; the last one has every candidate active.
+    // current speeds). Likewise a near-flat disk whose frozen rim point was not the lowest at
+    // the new configuration is re-frozen there. A few rounds at most; the last one has every
+    // candidate active.
     for round in 0..3 {
         if !report.status.is_success() {
             break;
         }
-        let missed = super::inequality::missed_contacts(model, ws);
+        let missed = super::inequality::missed_contacts(model, ws)
+            + super::inequality::refreeze_disks(model, ws);
         if missed == 0 {
             break;
         }
