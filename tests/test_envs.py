@@ -149,9 +149,26 @@ def test_env_states_bad_input_raises_and_changes_nothing():
         states.step(np.array([0, 2]), np.zeros((2, 3)), 4)
     with pytest.raises(ukemi.InputError, match="ctrl"):
         states.step(np.array([0, 1]), np.array([[0.0, 0, 0], [0, np.nan, 0]]), 4)
+    with pytest.raises(ukemi.InputError, match=">= 0"):
+        states.step(np.array([-1, 0]), np.zeros((2, 3)), 4)
     with pytest.raises(ukemi.InputError, match="row"):
         states.state(5)
     assert all(np.array_equal(b, states.qpos_qvel(i)) for i, b in enumerate(before))
+
+
+def test_copied_env_states_continue_identically():
+    import copy
+
+    model = ukemi.models.gymnasium("hopper")
+    states = ukemi._ukemi.EnvStates(model, 2)
+    states.reset(1, np.asarray(model.qpos0), np.full(model.nv, 0.1))
+    rows, ctrls = np.array([0, 1]), np.array([[0.3, -0.2, 0.1], [0.5, 0.5, -0.5]])
+    for _ in range(5):
+        states.step(rows, ctrls, 4)
+    twin = copy.deepcopy(states)
+    for _ in range(5):
+        assert states.step(rows, ctrls, 4)[0].tobytes() == twin.step(rows, ctrls, 4)[0].tobytes()
+    assert np.asarray(states.state(1).com_pos).tobytes() == np.asarray(twin.state(1).com_pos).tobytes()
 
 
 @pytest.mark.parametrize("env_id", ["ukemi/InvertedPendulum-v0", "ukemi/Hopper-v0"])

@@ -133,11 +133,18 @@ impl PyEnvStates {
         guard(|| {
             let m = self.model.clone();
             let (nx, nc, nb) = (m.nq + m.nv, m.ncontact(), m.nbody());
-            let rows: Vec<usize> = rows
+            let rows = rows
                 .as_slice()?
                 .iter()
-                .map(|&r| usize::try_from(r).unwrap_or(usize::MAX))
-                .collect();
+                .enumerate()
+                .map(|(k, &r)| {
+                    usize::try_from(r).map_err(|_| {
+                        InputError::new_err(format!(
+                            "invalid input: `rows[{k}]` = {r}: must be >= 0"
+                        ))
+                    })
+                })
+                .collect::<PyResult<Vec<usize>>>()?;
             if ctrls.shape() != [rows.len(), m.nu()] {
                 return Err(ShapeError::new_err(format!(
                     "shape of `ctrls`: expected [{}, {}], got {:?}",
@@ -158,7 +165,10 @@ impl PyEnvStates {
                 qvel_into(&m, &self.states[r], v);
             }
             let status: Vec<u8> = out.iter().map(|o| o.status.code()).collect();
-            let force: Vec<f64> = out.iter().flat_map(|o| o.forces.force_c.iter().copied()).collect();
+            let force: Vec<f64> = out
+                .iter()
+                .flat_map(|o| o.forces.force_c.iter().copied())
+                .collect();
             let wrench: Vec<f64> = out
                 .iter()
                 .flat_map(|o| o.forces.body_wrench.iter().copied())
@@ -173,7 +183,26 @@ impl PyEnvStates {
         })
     }
 
+    /// An independent copy (states cloned, fresh workspaces).
+    fn __copy__(&self) -> PyEnvStates {
+        PyEnvStates {
+            model: self.model.clone(),
+            states: self.states.clone(),
+            workspaces: (0..self.states.len())
+                .map(|_| Workspace::new(&self.model))
+                .collect(),
+        }
+    }
+
+    fn __deepcopy__(&self, _memo: &Bound<'_, PyAny>) -> PyEnvStates {
+        self.__copy__()
+    }
+
     fn __repr__(&self) -> String {
-        format!("ukemi.EnvStates(len={}, nbody={})", self.states.len(), self.model.nbody())
+        format!(
+            "ukemi.EnvStates(len={}, nbody={})",
+            self.states.len(),
+            self.model.nbody()
+        )
     }
 }

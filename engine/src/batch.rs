@@ -49,7 +49,11 @@ pub fn env_step(
             prev.clone_from(state);
         }
         status = step(model, state, ws, ctrl)?.status;
-        let finite = state.com_pos.iter().chain(&state.com_linvel).all(|x| x.is_finite());
+        let finite = state
+            .com_pos
+            .iter()
+            .chain(&state.com_linvel)
+            .all(|x| x.is_finite());
         if !status.is_success() || !finite {
             *state = start;
             let status = if status.is_success() {
@@ -95,15 +99,24 @@ pub fn env_step_rows(
     // which control each state gets (None: not stepped)
     let mut ctrl_of: Vec<Option<usize>> = vec![None; n];
     for (k, &r) in rows.iter().enumerate() {
-        ensure!(r < n, Error::input(format!("rows[{k}]"), r, format!("must be < {n}")));
+        ensure!(
+            r < n,
+            Error::input(format!("rows[{k}]"), r, format!("must be < {n}"))
+        );
         ensure!(
             ctrl_of[r].is_none(),
             Error::input(format!("rows[{k}]"), r, "appears twice")
         );
         ctrl_of[r] = Some(k);
         let u = &ctrls[k * nu..(k + 1) * nu];
-        validate_inputs(model, &states[r], &workspaces[r], u, &AppliedForces::default())
-            .map_err(|e| e.at(format!(" (row {r})")))?;
+        validate_inputs(
+            model,
+            &states[r],
+            &workspaces[r],
+            u,
+            &AppliedForces::default(),
+        )
+        .map_err(|e| e.at(format!(" (row {r})")))?;
     }
     let run = || {
         states
@@ -162,7 +175,11 @@ mod tests {
         let mut states = vec![State::reference(&model); 2];
         let mut wss = vec![Workspace::new(&model), Workspace::new(&model)];
         let before = states.clone();
-        for (rows, ctrls) in [(vec![0, 2], vec![0.0, 0.0]), (vec![0, 0], vec![0.0, 0.0]), (vec![0, 1], vec![0.0, f64::NAN])] {
+        for (rows, ctrls) in [
+            (vec![0, 2], vec![0.0, 0.0]),
+            (vec![0, 0], vec![0.0, 0.0]),
+            (vec![0, 1], vec![0.0, f64::NAN]),
+        ] {
             assert!(env_step_rows(&model, &mut states, &mut wss, &rows, &ctrls, 2).is_err());
             assert_eq!(states, before);
         }
