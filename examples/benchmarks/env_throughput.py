@@ -86,14 +86,21 @@ def coarse_step(env_id: str) -> dict[str, float] | None:
     return {"timestep": h * fs / new_fs, "frame_skip": new_fs}
 
 
-def failure_rates(names: list[str], num_envs: int, steps: int) -> None:
+def failure_rates(names: list[str], num_envs: int, steps: int, coarse: bool) -> None:
     """Solver failures under uniformly random actions: a vector env of ``num_envs`` (seed 0,
-    autoreset) stepped ``steps`` times per env."""
+    autoreset) stepped ``steps`` times per env; with ``coarse`` also at :func:`coarse_step`."""
     print("failed: env steps whose solve failed (each truncates its episode); statuses: every "
           "env step's solver status")
-    print(f"{'env':<12}{'env steps':>10}{'failed':>8}{'per 1000':>10}{'episodes':>10}  statuses")
-    for name in names:
-        venv = gym.make_vec(f"ukemi/{name}-v0", num_envs=num_envs, vectorization_mode="vector_entry_point")
+    print(f"{'env':<12}{'h, frame_skip':<16}{'env steps':>10}{'failed':>8}{'per 1000':>10}{'episodes':>10}  statuses")
+    runs = [(name, {}) for name in names]
+    if coarse:
+        runs = [r for name in names for r in ((name, {}), (name, coarse_step(f"ukemi/{name}-v0")))
+                if r[1] is not None]
+    for name, kwargs in runs:
+        venv = gym.make_vec(f"ukemi/{name}-v0", num_envs=num_envs, vectorization_mode="vector_entry_point",
+                            **kwargs)
+        base = venv.envs[0]
+        config = f"{base.model.timestep:g} s, {base.frame_skip}"
         venv.reset(seed=0)
         venv.action_space.seed(0)
         failed = episodes = 0
@@ -107,28 +114,32 @@ def failure_rates(names: list[str], num_envs: int, steps: int) -> None:
             episodes += int(np.sum(term | trunc))
         total = steps * num_envs
         shown = ", ".join(f"{k} {v}" for k, v in sorted(statuses.items()))
-        print(f"{name:<12}{total:>10}{failed:>8}{1e3 * failed / total:>10.1f}{episodes:>10}  {shown}",
+        print(f"{name:<12}{config:<16}{total:>10}{failed:>8}{1e3 * failed / total:>10.1f}{episodes:>10}  {shown}",
               flush=True)
     print(f"command: .venv/bin/python examples/benchmarks/env_throughput.py --failures {steps} "
-          f"--envs {' '.join(names)} --num-envs {num_envs}")
+          f"--envs {' '.join(names)} --num-envs {num_envs}" + (" --coarse" if coarse else ""))
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--envs", nargs="+", default=["Hopper", "HalfCheetah", "Ant", "Humanoid"])
-    p.add_argument("--num-envs", type=int, nargs="+", default=[1, 8, 64])
+    p.add_argument("--envs", nargs="+", help="default Hopper HalfCheetah Ant Humanoid "
+                   "(Quadruped Walker2d Ant with --failures)")
+    p.add_argument("--num-envs", type=int, nargs="+", help="default 1 8 64 (8 with --failures)")
     p.add_argument("--seconds", type=float, default=2.0, help="wall time per measurement")
     p.add_argument("--quick", action="store_true", help="Hopper only, N = 1 and 8, 0.3 s each")
     p.add_argument("--failures", type=int, metavar="STEPS",
                    help="instead: count solver failures over STEPS random-action steps of a vector "
                         "env of --num-envs (first value) per env (default envs Quadruped Walker2d Ant)")
+    p.add_argument("--coarse", action="store_true",
+                   help="with --failures: also at the larger engine time step of the throughput table")
     args = p.parse_args()
     if args.failures:
         warnings.simplefilter("ignore")
-        envs = args.envs if args.envs != p.get_default("envs") else ["Quadruped", "Walker2d", "Ant"]
-        num = args.num_envs[0] if args.num_envs != p.get_default("num_envs") else 8
-        failure_rates(envs, num, args.failures)
+        failure_rates(args.envs or ["Quadruped", "Walker2d", "Ant"], (args.num_envs or [8])[0],
+                      args.failures, args.coarse)
         return
+    args.envs = args.envs or ["Hopper", "HalfCheetah", "Ant", "Humanoid"]
+    args.num_envs = args.num_envs or [1, 8, 64]
     if args.quick:
         args.envs, args.num_envs, args.seconds = ["Hopper"], [1, 8], 0.3
     warnings.simplefilter("ignore")  # solver failures are counted in the table instead
