@@ -16,7 +16,8 @@ use crate::{Error, Result, ensure};
 /// What one environment step of one state reports.
 #[derive(Clone, Debug)]
 pub struct EnvStep {
-    /// The last engine step's status when every step succeeded, else the first failure's.
+    /// The first failure's status; if none failed, `Acceptable` when any step ended so, else
+    /// `Converged`.
     pub status: SolveStatus,
     /// Contact forces of the last engine step; zero when a step failed.
     pub forces: ContactForces,
@@ -48,23 +49,29 @@ pub fn env_step(
         if k + 1 == nstep && k > 0 {
             prev.clone_from(state);
         }
-        status = step(model, state, ws, ctrl)?.status;
-        let finite = state
-            .com_pos
-            .iter()
-            .chain(&state.com_linvel)
-            .all(|x| x.is_finite());
-        if !status.is_success() || !finite {
+        let report = step(model, state, ws, ctrl)?;
+        let finite = [
+            &state.com_pos,
+            &state.quat,
+            &state.com_linvel,
+            &state.angvel_b,
+        ]
+        .iter()
+        .all(|a| a.iter().all(|x| x.is_finite()));
+        if !report.status.is_success() || !finite {
             *state = start;
-            let status = if status.is_success() {
+            let status = if report.status.is_success() {
                 SolveStatus::NonFinite
             } else {
-                status
+                report.status
             };
             return Ok(EnvStep {
                 status,
                 forces: zero_forces(model),
             });
+        }
+        if report.status == SolveStatus::Acceptable {
+            status = SolveStatus::Acceptable;
         }
     }
     let forces = if nstep == 0 {
