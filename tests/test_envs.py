@@ -78,6 +78,99 @@ def test_same_seed_same_trajectory(env_id):
     assert all(np.array_equal(x, y) for x, y in zip(a, _rollout(env_a, 7, actions), strict=True))
 
 
+# -- full-state stepping ---------------------------------------------------------------------------
+def _env_trajectory(env, seed, actions):
+    """Reset, then step ``actions``: the reset state, each step's ``[qpos, qvel]`` and info."""
+    env.reset(seed=seed)
+    start = env.model.make_state(env.qpos.copy(), env.qvel.copy())
+    xs, infos = [], []
+    for a in actions:
+        *_, term, trunc, info = env.step(a)
+        xs.append(env.state_vector())
+        infos.append(info)
+        assert not (term or trunc) and info["solver_status"] in ukemi.SUCCESS_STATUSES
+    return start, np.array(xs), infos
+
+
+@pytest.mark.parametrize("env_id, kwargs", [("ukemi/Hopper-v0", {}),  # contact, frame_skip 4
+                                            ("ukemi/Ant-v0", {})])  # free joint, lands by step 12
+def test_env_trajectory_is_the_rollout_of_expanded_controls(env_id, kwargs):
+    env = gym.make(env_id, **kwargs).unwrapped
+    k = env.frame_skip
+    actions = np.random.default_rng(5).uniform(-1, 1, (12, env.action_space.shape[0])).astype(np.float32)
+    start, xs, infos = _env_trajectory(env, 4, actions)
+    traj = ukemi.rollout(env.model, start, np.repeat(actions.astype(np.float64), k, axis=0))
+    ref = np.concatenate([traj.qpos, traj.qvel], axis=1)[k::k]
+    err = np.abs(xs - ref).max()
+    print(f"{env_id}: max |env - rollout| = {err:.1e} over {len(xs)} env steps")
+    assert err <= 1e-12
+    # the last step's contact forces are the rollout's last impulses / timestep
+    impulse = np.asarray(traj.final_state.contact_impulse)
+    np.testing.assert_allclose(infos[-1]["contact_forces"], impulse / env.model.timestep, rtol=0, atol=1e-9)
+    assert infos[-1]["contact_forces"][:, 0].max() > 1.0  # in contact
+    # the env state is not rebuilt from [qpos, qvel] between steps: that would move it by O(dt)
+    s, rebuilt = start, []
+    for a in actions:
+        t = ukemi.rollout(env.model, s, np.repeat(a[None].astype(np.float64), k, axis=0))
+        s = env.model.make_state(t.qpos[-1], t.qvel[-1])
+        rebuilt.append(np.concatenate([t.qpos[-1], t.qvel[-1]]))
+    assert np.abs(np.array(rebuilt) - ref).max() > 1e-6
+    # a reset with the same seed reproduces the trajectory bit for bit
+    start2, xs2, _ = _env_trajectory(env, 4, actions)
+    assert start2.qpos.tobytes() == start.qpos.tobytes() and xs2.tobytes() == xs.tobytes()
+
+
+def test_vector_env_rows_are_full_states_of_single_envs():
+    env_id, n = "ukemi/Hopper-v0", 4
+    venv = UkemiVectorEnv(env_id, n)
+    singles = [gym.make(env_id).unwrapped for _ in range(n)]
+    venv.reset(seed=20)
+    for i, e in enumerate(singles):
+        e.reset(seed=20 + i)
+    actions = np.random.default_rng(6).uniform(-1, 1, (10, n, 3)).astype(np.float32)
+    for a in actions:
+        venv.step(a)
+        for i, e in enumerate(singles):
+            e.step(a[i])
+    for i, e in enumerate(singles):
+        sub = venv.envs[i]
+        assert sub.state_vector().tobytes() == e.state_vector().tobytes()
+        # the full states (midpoint velocities, warm start) agree, not only [qpos, qvel]
+        for name in ("com_pos", "body_quat", "body_linvel", "body_angvel", "joint_impulse", "contact_impulse"):
+            assert np.asarray(getattr(sub.state, name)).tobytes() == np.asarray(getattr(e.state, name)).tobytes(), name
+
+
+def test_env_states_bad_input_raises_and_changes_nothing():
+    states = ukemi._ukemi.EnvStates(ukemi.models.gymnasium("hopper"), 2)
+    before = [states.qpos_qvel(i) for i in range(2)]
+    with pytest.raises(ukemi.ShapeError, match="ctrls"):
+        states.step(np.array([0, 1]), np.zeros((2, 2)), 4)
+    with pytest.raises(ukemi.InputError, match=r"rows\[1\]"):
+        states.step(np.array([0, 2]), np.zeros((2, 3)), 4)
+    with pytest.raises(ukemi.InputError, match="ctrl"):
+        states.step(np.array([0, 1]), np.array([[0.0, 0, 0], [0, np.nan, 0]]), 4)
+    with pytest.raises(ukemi.InputError, match=">= 0"):
+        states.step(np.array([-1, 0]), np.zeros((2, 3)), 4)
+    with pytest.raises(ukemi.InputError, match="row"):
+        states.state(5)
+    assert all(np.array_equal(b, states.qpos_qvel(i)) for i, b in enumerate(before))
+
+
+def test_copied_env_states_continue_identically():
+    import copy
+
+    model = ukemi.models.gymnasium("hopper")
+    states = ukemi._ukemi.EnvStates(model, 2)
+    states.reset(1, np.asarray(model.qpos0), np.full(model.nv, 0.1))
+    rows, ctrls = np.array([0, 1]), np.array([[0.3, -0.2, 0.1], [0.5, 0.5, -0.5]])
+    for _ in range(5):
+        states.step(rows, ctrls, 4)
+    twin = copy.deepcopy(states)
+    for _ in range(5):
+        assert states.step(rows, ctrls, 4)[0].tobytes() == twin.step(rows, ctrls, 4)[0].tobytes()
+    assert np.asarray(states.state(1).com_pos).tobytes() == np.asarray(twin.state(1).com_pos).tobytes()
+
+
 @pytest.mark.parametrize("env_id", ["ukemi/InvertedPendulum-v0", "ukemi/Hopper-v0"])
 def test_vector_env_equals_single_envs(env_id):
     n, seed, steps, limit = 3, 11, 25, 10
@@ -406,6 +499,45 @@ def test_contact_forces_carry_the_weight_and_lie_in_the_cone():
         gym.make("ukemi/Pendulum-v0").unwrapped.contact_forces.shape == (0, 3)
 
 
+def test_ant_cfrc_ext_carries_the_weight_like_mujoco():
+    """Ant-v5's contact-force observation: at rest the per-body wrenches (torque about the
+    ant's centre of mass c, force) sum to the weight at c in both engines. The poses differ
+    (MuJoCo's soft joint limits and contacts let the legs splay further) and the split between
+    the feet need not agree: four feet on a plane are statically indeterminate."""
+    pytest.importorskip("mujoco")
+    from ukemi.envs._com import subtree_com
+
+    ours, ref = gym.make("ukemi/Ant-v0").unwrapped, gym.make("Ant-v5").unwrapped
+    qpos = ours.init_qpos.copy()
+    qpos[:2] = [1.0, 0.5]  # off the origin, so torques about c and about the origin differ
+    for env in (ours, ref):
+        env.reset(seed=0)
+        env.set_state(qpos, np.zeros(14))
+    for _ in range(60):
+        ours.step(np.zeros(8, np.float32))
+    for _ in range(500):
+        ref.step(np.zeros(8))
+    mass = float(np.sum(np.asarray(ours.model.body_mass)[1:]))
+    assert mass == pytest.approx(float(ref.model.body_mass[1:].sum()), rel=1e-12)
+    weight = mass * 9.81
+    for name, cfrc, c in (("ukemi", ours.cfrc_ext, subtree_com(ours)),
+                          ("mujoco", ref.data.cfrc_ext, ref.data.subtree_com[1])):
+        total = cfrc.sum(0)
+        print(f"{name}: c = {np.round(c, 4)}, total wrench {total}, "
+              f"relative weight error {abs(total[5] - weight) / weight:.1e}")
+        assert abs(total[5] - weight) <= 1e-6 * weight, name
+        np.testing.assert_allclose(total[[0, 1, 2, 3, 4]], 0.0, atol=1e-6 * weight, err_msg=name)
+        assert np.all(cfrc[:, 5] >= -1e-9) and np.count_nonzero(cfrc[:, 5] > 1e-3) >= 3, name
+        assert c[0] == pytest.approx(1.0, abs=0.05) and c[1] == pytest.approx(0.5, abs=0.05)
+    # observation and reward as v5's: clipped wrenches of bodies 1.., contact cost on all rows
+    obs = ours._get_obs()
+    assert obs.shape == ref._get_obs().shape == (105,)
+    np.testing.assert_array_equal(obs[27:], np.clip(ours.cfrc_ext[1:], -1, 1).ravel())
+    _, r, _, _, info = ours.step(np.zeros(8, np.float32))
+    assert info["reward_contact"] == pytest.approx(-5e-4 * np.sum(np.clip(ours.cfrc_ext, -1, 1) ** 2), rel=1e-12)
+    assert gym.make("ukemi/Ant-v0", include_cfrc_ext_in_observation=False).observation_space.shape == (27,)
+
+
 # -- ukemi's own tasks -----------------------------------------------------------------------------------
 def test_box_push_reward_and_pushing_moves_the_box_to_the_goal_side():
     env = gym.make("ukemi/BoxPush-v0").unwrapped
@@ -450,11 +582,17 @@ def test_task_reward_equals_env_reward(name):
     torch = pytest.importorskip("torch")
     from ukemi.envs.differentiable import make_task
 
-    env = gym.make(f"ukemi/{name}-v0").unwrapped
+    # Ant's task reward has no contact cost (contact forces are not in the flat state)
+    kwargs = {"contact_cost_weight": 0.0} if name == "Ant" else {}
+    env = gym.make(f"ukemi/{name}-v0", **kwargs).unwrapped
     env.reset(seed=3)
     env.action_space.seed(3)
     goal = env.goal if name == "BoxPush" else None
     tj, tt = make_task(name, "jax", goal=goal), make_task(name, "torch", goal=goal)
+    # one engine step per env step: the flat task's map is the env's from a fresh state
+    env1 = gym.make(f"ukemi/{name}-v0", frame_skip=1, **kwargs).unwrapped
+    tj1 = make_task(name, "jax", goal=goal, frame_skip=1)
+    nq, dev = env.model.nq, 0.0
     for _ in range(3):
         x, a = env.state_vector(), 0.5 * env.action_space.sample()
         _, r, term, _, info = env.step(a)
@@ -464,9 +602,16 @@ def test_task_reward_equals_env_reward(name):
         rt = tt.reward(torch.as_tensor(x), torch.as_tensor(u), torch.as_tensor(x1))
         assert float(rt) == pytest.approx(r, abs=1e-12)
         assert bool(tj.terminated(jnp.asarray(x1))) == term
-        # the task's dynamics are the env's (up to the solver's tolerance: no warm start between
-        # substeps on the flat path)
-        np.testing.assert_allclose(np.asarray(tj.step(jnp.asarray(x), jnp.asarray(u))), x1, atol=1e-6)
+        # The task's state is flat: every engine step rebuilds the maximal state from [qpos,
+        # qvel] and restarts the solver, the env keeps its full state (midpoint velocities, warm
+        # start). From a fresh state the first engine steps agree to the solver's tolerance;
+        # over frame_skip steps they drift apart by O(dt).
+        env1.set_state(x[:nq], x[nq:])
+        env1.step(a)
+        np.testing.assert_allclose(np.asarray(tj1.step(jnp.asarray(x), jnp.asarray(u))),
+                                   env1.state_vector(), atol=1e-6)
+        dev = max(dev, float(np.abs(np.asarray(tj.step(jnp.asarray(x), jnp.asarray(u))) - x1).max()))
+    print(f"{name}: task.step vs env step (frame_skip {env.frame_skip}), max deviation {dev:.1e}")
 
 
 def test_task_return_gradient_matches_finite_differences():

@@ -379,61 +379,6 @@ pub fn flat_rollout<'py>(
     })
 }
 
-/// Batched gym env steps: `xs (B, nx)`, `us (B, nu)` held for `nstep` steps →
-/// `(xs_next (B, nx), status (B,) u8, contact_force (B, ncontact, 3), body_wrench (B, nbody, 6))`.
-/// A row whose solve failed keeps its input state and reports its status code.
-#[pyfunction]
-#[pyo3(name = "_env_step")]
-#[allow(clippy::type_complexity)]
-pub fn env_step<'py>(
-    py: Python<'py>,
-    model: &PyModel,
-    xs: PyReadonlyArray2<'py, f64>,
-    us: PyReadonlyArray2<'py, f64>,
-    nstep: usize,
-) -> PyResult<(
-    Bound<'py, PyArray2<f64>>,
-    Bound<'py, PyArray1<u8>>,
-    Bound<'py, PyArray3<f64>>,
-    Bound<'py, PyArray3<f64>>,
-)> {
-    guard(|| {
-        let (b, n, nu) = (xs.shape()[0], xs.shape()[1], us.shape()[1]);
-        same_batch("us", b, us.shape()[0])?;
-        let (xs, us) = (xs.as_slice()?, us.as_slice()?);
-        let m = model.inner.clone();
-        let (nc, nb) = (m.ncontact(), m.nbody());
-        let out = py
-            .detach(|| {
-                flat::batched(std::slice::from_ref(&m), b, |mm, i| {
-                    flat::env_step(
-                        mm,
-                        &xs[i * n..(i + 1) * n],
-                        &us[i * nu..(i + 1) * nu],
-                        nstep,
-                    )
-                })
-            })
-            .py()?;
-        let x: Vec<f64> = out.iter().flat_map(|r| r.x.iter().copied()).collect();
-        let status: Vec<u8> = out.iter().map(|r| r.status).collect();
-        let force: Vec<f64> = out
-            .iter()
-            .flat_map(|r| r.forces.force_c.iter().copied())
-            .collect();
-        let wrench: Vec<f64> = out
-            .iter()
-            .flat_map(|r| r.forces.body_wrench.iter().copied())
-            .collect();
-        Ok((
-            PyArray1::from_vec(py, x).reshape([b, n])?,
-            PyArray1::from_vec(py, status),
-            PyArray1::from_vec(py, force).reshape([b, nc, 3])?,
-            PyArray1::from_vec(py, wrench).reshape([b, nb, 6])?,
-        ))
-    })
-}
-
 /// Batched flat rollout VJPs: `(adj_x0 (B, nx), adj_us (B, T, nu), adj_params (B, nparams))`.
 #[pyfunction]
 #[pyo3(name = "_flat_rollout_vjp", signature = (model, x0s, us, adj, kappa_grad, params=None, wrt_params=false))]

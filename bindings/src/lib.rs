@@ -1,4 +1,5 @@
 //! `ukemi._ukemi`: the Python extension. Registration only; see the sibling modules.
+mod envs;
 mod errors;
 mod gradients;
 mod mjcf;
@@ -16,6 +17,7 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::PyModel>()?;
     m.add_class::<state::PyState>()?;
     m.add_class::<step::PyStepInfo>()?;
+    m.add_class::<envs::PyEnvStates>()?;
     m.add_function(wrap_pyfunction!(step::step, m)?)?;
     m.add_function(wrap_pyfunction!(step::solver_trace, m)?)?;
     m.add_function(wrap_pyfunction!(step::step_smoothed, m)?)?;
@@ -29,7 +31,6 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gradients::flat_step_vjp, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_rollout, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_rollout_vjp, m)?)?;
-    m.add_function(wrap_pyfunction!(gradients::env_step, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_step_jacobians, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::get_num_threads, m)?)?;

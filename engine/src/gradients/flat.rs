@@ -3,20 +3,19 @@
 //! a plain array of the same shape. Batched versions run the batch in parallel (rayon).
 //!
 //! A flat state carries no solver warm start, so every flat step starts the contact solve from
-//! the neutral point; [`rollout`] chains full states internally and keeps the warm start.
+//! the neutral point; [`rollout`] chains full states internally and keeps the warm start. The
+//! environments step full states instead ([`crate::batch`]).
 use rayon::prelude::*;
 
 use super::rollout::{advance, rollout_vjp_with};
 use super::tangent::{
-    Coordinates, Point, qpos_adjoint_from_tangent, qpos_raw_from_tangent, qpos_tangent_from_raw,
+    Coordinates, qpos_adjoint_from_tangent, qpos_raw_from_tangent, qpos_tangent_from_raw,
     tangent_adjoint_from_qpos,
 };
 use super::{Linearization, Wrt};
 use crate::joints::coordinates::{qpos_into, qvel_into, set_minimal};
 use crate::model::Model;
-use crate::solver::newton;
-use crate::state::{SolveStatus, State, Workspace};
-use crate::step::AppliedForces;
+use crate::state::{State, Workspace};
 use crate::{Error, Result, ensure};
 
 /// Length of a flat state.
@@ -181,57 +180,6 @@ pub fn rollout(model: &Model, x0: &[f64], us: &[f64], nstep: usize) -> Result<Ve
     Ok(out)
 }
 
-/// What one environment step returns: the state after `nstep` steps under constant control,
-/// how the solves ended, and the contact forces of the last step.
-#[derive(Clone, Debug)]
-pub struct EnvStep {
-    /// Flat state after the steps; the input state when a step failed.
-    pub x: Vec<f64>,
-    /// [`crate::SolveStatus::code`] of the first failed step, else 0 (converged).
-    pub status: u8,
-    /// Contact forces of the last step (zero when a step failed).
-    pub forces: crate::contact::wrench::ContactForces,
-}
-
-/// `nstep` steps of flat `x` holding control `u` (a gym env step with `frame_skip = nstep`).
-/// Steps exactly as [`rollout`] does (same warm start, same states), but a step that does not
-/// converge, or a non-finite state, is reported in `status` instead of failing.
-pub fn env_step(model: &Model, x: &[f64], u: &[f64], nstep: usize) -> Result<EnvStep> {
-    use crate::contact::wrench::{ContactForces, contact_forces};
-    let mut s = state_of(model, x)?;
-    let mut ws = Workspace::new(model);
-    let failed = |status: SolveStatus| EnvStep {
-        x: x.to_vec(),
-        status: status.code(),
-        forces: ContactForces {
-            force_c: vec![0.0; 3 * model.ncontact()],
-            body_wrench: vec![0.0; 6 * model.nbody()],
-        },
-    };
-    let mut prev = s.clone();
-    for _ in 0..nstep {
-        prev = Point::new(model, &s, Coordinates::Minimal)?.state;
-        crate::step::validate_inputs(model, &prev, &ws, u, &AppliedForces::default())?;
-        newton::prepare(model, &prev, &mut ws, u, &AppliedForces::default());
-        let report = newton::solve(model, &prev, &mut ws);
-        if !report.status.is_success() {
-            return Ok(failed(report.status));
-        }
-        s = prev.clone();
-        newton::write_state(model, &mut s, &ws);
-    }
-    let mut out = vec![0.0; nx(model)];
-    flat_of(model, &s, &mut out);
-    if !out.iter().all(|v| v.is_finite()) {
-        return Ok(failed(SolveStatus::NonFinite));
-    }
-    Ok(EnvStep {
-        x: out,
-        status: 0,
-        forces: contact_forces(model, &prev, &s),
-    })
-}
-
 /// Adjoints `(x0, us, params)` of a flat rollout given `adj_xs` (`(T+1, nq+nv)` row-major).
 pub fn rollout_vjp(
     model: &Model,
@@ -297,6 +245,14 @@ pub fn num_threads() -> usize {
     match POOL.read().ok().and_then(|g| g.clone()) {
         Some(p) => p.current_num_threads(),
         None => rayon::current_num_threads(),
+    }
+}
+
+/// Run `f` (which may use rayon) in the pool of [`set_num_threads`], or rayon's global pool.
+pub(crate) fn in_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    match POOL.read().ok().and_then(|g| g.clone()) {
+        Some(p) => p.install(f),
+        None => f(),
     }
 }
 

@@ -14,7 +14,9 @@
 
 Each env uses the same MJCF asset, observation layout, action space, reward terms, termination
 rule, reset noise and ``frame_skip`` as the v5 env of the same name; the docstring of each
-class lists what differs (contact model, MuJoCo-only quantities such as ``cfrc_ext``). A step
+class lists what differs (contact model, MuJoCo quantities such as ``cfrc_ext`` rebuilt from
+ukemi's contact impulses). Each env keeps its full engine state between steps, so its
+trajectory is ``ukemi.rollout``'s under the same controls (:mod:`ukemi.envs.base`). A step
 whose solve fails truncates the episode with ``info["solver_status"]``
 (:mod:`ukemi.envs.base`); every step's ``info["contact_forces"]`` is the (ncontact, 3) contact
 force per candidate (impulse / time step, contact frame). Swimmer is not provided: it needs

@@ -1,4 +1,4 @@
-"""Quadruped on gymnasium's ant.xml: Ant-v5 on ukemi, without the contact-force terms."""
+"""Quadruped on gymnasium's ant.xml: Ant-v5 on ukemi, contact-force observation and cost included."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import UnsupportedError
+from ._com import cfrc_ext
 from .base import UkemiMujocoEnv
 
 
@@ -14,15 +14,17 @@ class AntEnv(UkemiMujocoEnv):
     """Four-legged walker (gymnasium ``Ant-v5`` on ukemi).
 
     Same as v5: ``ant.xml``, ``frame_skip=5`` (dt = 0.05 s), action Box(-1, 1, (8,)),
-    reward ``ẋ(main body) + 1·healthy − 0.5·|a|² − contact cost``, healthy iff the state is
-    finite and z = qpos[2] in [0.2, 1.0], terminated when unhealthy, reset noise uniform ±0.1
-    on qpos and 0.1·N(0, 1) on qvel, 1000-step limit.
+    reward ``ẋ(main body) + 1·healthy − 0.5·|a|² − 5e-4·|clip(cfrc_ext, −1, 1)|²``, healthy iff
+    the state is finite and z = qpos[2] in [0.2, 1.0], terminated when unhealthy, reset noise
+    uniform ±0.1 on qpos and 0.1·N(0, 1) on qvel, 1000-step limit. Observation (105,) =
+    ``[qpos[2:] (13), qvel (14), clip(cfrc_ext[1:], −1, 1) (78)]``; (27,) with
+    ``include_cfrc_ext_in_observation=False`` (the contact cost stays in the reward, as in v5).
 
-    Differences: MuJoCo's ``cfrc_ext`` (per-body external contact wrenches, 13×6 = 78 numbers)
-    has no ukemi counterpart on the env's flat-state path, so the observation is
-    ``[qpos[2:], qvel]`` (27,) as v5 with ``include_cfrc_ext_in_observation=False`` (passing
-    True raises ``ukemi.UnsupportedError``), and the contact cost is 0 (``info["reward_contact"]``
-    is 0.0; in MuJoCo it is at most 5e-4·78 ≈ 0.04 per step). Contact is ukemi's hard contact.
+    ``cfrc_ext`` is MuJoCo's per-body external contact wrench (torque about the ant's centre
+    of mass, force; world axes), built from ukemi's contact impulses / time step of the last
+    engine step (:mod:`ukemi.envs._com`). Contact is ukemi's hard contact, MuJoCo's is soft, so
+    the numbers differ in motion; at rest both carry the weight (the totals agree to 1e-6, the
+    split between feet need not: four feet on a plane are statically indeterminate).
     """
 
     _view = ("xz", 1, 1.5)
@@ -35,10 +37,7 @@ class AntEnv(UkemiMujocoEnv):
                  contact_force_range: tuple[float, float] = (-1.0, 1.0),
                  reset_noise_scale: float = 0.1,
                  exclude_current_positions_from_observation: bool = True,
-                 include_cfrc_ext_in_observation: bool = False, **kwargs: Any) -> None:
-        if include_cfrc_ext_in_observation:
-            raise UnsupportedError("unsupported: `include_cfrc_ext_in_observation=True` (ukemi's "
-                                   "envs do not provide MuJoCo's cfrc_ext contact wrenches)")
+                 include_cfrc_ext_in_observation: bool = True, **kwargs: Any) -> None:
         self._forward_reward_weight = forward_reward_weight
         self._ctrl_cost_weight = ctrl_cost_weight
         self._contact_cost_weight = contact_cost_weight
@@ -49,6 +48,7 @@ class AntEnv(UkemiMujocoEnv):
         self._contact_force_range = contact_force_range
         self._reset_noise_scale = reset_noise_scale
         self._exclude_current_positions_from_observation = exclude_current_positions_from_observation
+        self._include_cfrc_ext_in_observation = include_cfrc_ext_in_observation
         super().__init__(xml_file, frame_skip, **kwargs)
 
     def _main_xy(self) -> np.ndarray:
@@ -64,8 +64,25 @@ class AntEnv(UkemiMujocoEnv):
     def _snapshot(self) -> np.ndarray:
         return self._main_xy()
 
+    @property
+    def cfrc_ext(self) -> np.ndarray:
+        """MuJoCo's ``cfrc_ext`` of the last env step, unclipped, (nbody, 6). v5's
+        ``contact_forces`` is ``np.clip(env.cfrc_ext, *contact_force_range)`` here: in ukemi's
+        envs ``contact_forces`` is the per-candidate force of ``info["contact_forces"]``."""
+        return cfrc_ext(self)
+
+    def _clipped_cfrc_ext(self) -> np.ndarray:
+        return np.clip(self.cfrc_ext, *self._contact_force_range)
+
+    @property
+    def contact_cost(self) -> float:
+        """``contact_cost_weight · |clip(cfrc_ext)|²`` of the last env step."""
+        return self._contact_cost_weight * float(np.sum(np.square(self._clipped_cfrc_ext())))
+
     def _get_obs(self) -> np.ndarray:
         position = self.qpos[2:] if self._exclude_current_positions_from_observation else self.qpos
+        if self._include_cfrc_ext_in_observation:
+            return np.concatenate((position, self.qvel, self._clipped_cfrc_ext()[1:].ravel()))
         return np.concatenate((position, self.qvel))
 
     def _reward(self, before, action):
@@ -73,14 +90,15 @@ class AntEnv(UkemiMujocoEnv):
         forward_reward = x_velocity * self._forward_reward_weight
         healthy_reward = self.is_healthy * self._healthy_reward
         ctrl_cost = self._ctrl_cost_weight * float(np.sum(np.square(action)))
+        contact_cost = self.contact_cost
         terminated = (not self.is_healthy) and self._terminate_when_unhealthy
         qpos = self.qpos
         info = {"x_position": qpos[0], "y_position": qpos[1],
                 "distance_from_origin": float(np.linalg.norm(qpos[0:2])),
                 "x_velocity": x_velocity, "y_velocity": y_velocity,
-                "reward_forward": forward_reward, "reward_ctrl": -ctrl_cost, "reward_contact": 0.0,
-                "reward_survive": healthy_reward}
-        return forward_reward + healthy_reward - ctrl_cost, terminated, info
+                "reward_forward": forward_reward, "reward_ctrl": -ctrl_cost,
+                "reward_contact": -contact_cost, "reward_survive": healthy_reward}
+        return forward_reward + healthy_reward - ctrl_cost - contact_cost, terminated, info
 
     def _reset_model(self) -> None:
         s = self._reset_noise_scale

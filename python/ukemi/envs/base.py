@@ -1,8 +1,13 @@
 """Base class of ukemi's gymnasium environments: MuJoCo's ``MujocoEnv`` contract on ukemi physics.
 
-The env state is the flat ``x = [qpos, qvel]`` in MuJoCo's layout (``set_state(qpos, qvel)`` and
-``state_vector()`` behave as in gymnasium's ``MujocoEnv``). One env step holds the action as the
-control for ``frame_skip`` engine steps, so ``dt = timestep * frame_skip``.
+The env keeps the full engine state between steps (one row of a ``ukemi._ukemi.EnvStates``:
+positions, the variational integrator's midpoint velocities and the solver's warm start), so a
+trajectory under a fixed action sequence is exactly ``ukemi.rollout``'s with each action's
+control repeated ``frame_skip`` times (tests/test_envs.py). ``reset`` and
+``set_state(qpos, qvel)`` make a fresh state from MuJoCo-layout coordinates (as
+``model.make_state(qpos, qvel)``); ``qpos``, ``qvel`` and ``state_vector()`` read it as in
+gymnasium's ``MujocoEnv``, ``state`` is a copy of the full ``ukemi.State``. One env step holds
+the action as the control for ``frame_skip`` engine steps, so ``dt = timestep * frame_skip``.
 
 Solver failures: an env step whose solve fails at any substep (status ``max_iterations``,
 ``line_search_failed`` or ``non_finite``) **truncates** the episode. The state stays at the last
@@ -38,10 +43,11 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from .. import _ukemi
 from .._simulate import SUCCESS
 from . import _render
 from ._assets import asset_path, load_model, mjcf_info, rotate
-from ._physics import simulate
+from ._physics import step_rows
 
 
 class SolverFailureWarning(RuntimeWarning):
@@ -100,8 +106,9 @@ class UkemiMujocoEnv(gymnasium.Env):
         self._body_index = {n: i for i, n in enumerate(self.model.body_names)}
         self.init_qpos = np.array(self.model.qpos0, dtype=np.float64)
         self.init_qvel = np.zeros(self.model.nv)
-        self._x = np.concatenate([self.init_qpos, self.init_qvel])
-        self._state = None
+        # the full engine state lives in row `_row` of `_states` (the vector env shares one)
+        self._states, self._row = _ukemi.EnvStates(self.model, 1), 0
+        self._set_x(np.concatenate([self.init_qpos, self.init_qvel]))
         self._clear_contacts()
         low, high = np.asarray(self.model.actuator_ctrlrange, dtype=np.float32).T
         self.action_space = spaces.Box(low=low, high=high, dtype=np.float32)
@@ -158,15 +165,26 @@ class UkemiMujocoEnv(gymnasium.Env):
         return self._body_wrench.copy()
 
     def _set_x(self, x: np.ndarray) -> None:
-        self._x = np.array(x, dtype=np.float64)
-        self._state = None
+        """A fresh engine state at ``x = [qpos, qvel]`` (reference warm start)."""
+        x = np.array(x, dtype=np.float64)
+        nq = self.model.nq
+        self._states.reset(self._row, x[:nq], x[nq:])
+        self._x, self._state = x, None
+
+    def _accept(self, x_next: np.ndarray) -> None:
+        """Take the stepped row's ``[qpos, qvel]`` as the env's (the row already holds it)."""
+        self._x, self._state = x_next, None
+
+    def _attach(self, states, row: int) -> None:
+        """Move this env's full state into row ``row`` of ``states`` and step it there."""
+        states.set_state(row, self._states.state(self._row))
+        self._states, self._row = states, int(row)
 
     @property
     def state(self):
-        """The full ``ukemi.State`` of the current ``(qpos, qvel)``, built on demand."""
+        """The full ``ukemi.State`` (a copy, cached until the next step or reset)."""
         if self._state is None:
-            nq = self.model.nq
-            self._state = self.model.make_state(self._x[:nq], self._x[nq:])
+            self._state = self._states.state(self._row)
         return self._state
 
     def body_xpos(self, name: str) -> np.ndarray:
@@ -192,7 +210,7 @@ class UkemiMujocoEnv(gymnasium.Env):
     def step(self, action):
         action = self._check_action(action)
         before = self._snapshot()
-        phys = simulate(self.model, self._x[None], self._ctrl(action)[None], self.frame_skip)
+        phys = step_rows(self._states, [self._row], self._ctrl(action)[None], self.frame_skip)
         return self._after_physics(action, before, *(p[0] for p in phys))
 
     def render(self):
@@ -232,7 +250,7 @@ class UkemiMujocoEnv(gymnasium.Env):
             self._clear_contacts()
             return self._get_obs(), 0.0, False, True, {"solver_status": status,
                                                        "contact_forces": self.contact_forces}
-        self._set_x(x_next)
+        self._accept(x_next)
         self._contact_force, self._body_wrench = contact_force, body_wrench
         reward, terminated, info = self._reward(before, action)
         info["solver_status"] = status

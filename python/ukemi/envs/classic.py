@@ -65,10 +65,13 @@ class PendulumEnv(UkemiMujocoEnv):
     def _snapshot(self) -> np.ndarray:
         return self._x.copy()
 
-    def _after_physics(self, action, before, x_next, status, contact_force, body_wrench):
+    def _accept(self, x_next: np.ndarray) -> None:
+        if abs(x_next[1]) <= self.max_speed:
+            return super()._accept(x_next)
+        # clipping the speed changes the state: a fresh one at the clipped velocity
         x_next = x_next.copy()
         x_next[1] = np.clip(x_next[1], -self.max_speed, self.max_speed)
-        return super()._after_physics(action, before, x_next, status, contact_force, body_wrench)
+        self._set_x(x_next)
 
     def _reward(self, before, action):
         theta, theta_dot = before

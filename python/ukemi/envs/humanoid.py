@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ._assets import rotate
+from ._com import cfrc_ext, subtree_com
 from .base import UkemiMujocoEnv
 
 
@@ -36,7 +37,7 @@ def com_quantities(env: UkemiMujocoEnv) -> dict[str, np.ndarray]:
     s, m = env.state, env.model
     mass = np.asarray(m.body_mass)
     com = np.asarray(s.com_pos)
-    c = (mass[1:, None] * com[1:]).sum(0) / mass[1:].sum()
+    c = subtree_com(env)
     rot = quat_matrix(np.asarray(s.body_quat))
     inertia = rot @ np.asarray(m.body_inertia) @ np.swapaxes(rot, -1, -2)
     d = com - c
@@ -47,11 +48,8 @@ def com_quantities(env: UkemiMujocoEnv) -> dict[str, np.ndarray]:
                              mass[:, None] * d, mass[:, None]], axis=1)
     omega, v_origin, origin = np.asarray(s.body_angvel), np.asarray(s.body_linvel), np.asarray(s.body_pos)
     cvel = np.concatenate([omega, v_origin + np.cross(omega, c - origin)], axis=1)
-    wrench = env.body_contact_wrench
-    force = wrench[:, 3:]
-    cfrc_ext = np.concatenate([wrench[:, :3] - np.cross(c, force), force], axis=1)
-    cinert[0], cvel[0], cfrc_ext[0] = 0.0, 0.0, 0.0
-    return {"cinert": cinert, "cvel": cvel, "cfrc_ext": cfrc_ext, "subtree_com": c}
+    cinert[0], cvel[0] = 0.0, 0.0
+    return {"cinert": cinert, "cvel": cvel, "cfrc_ext": cfrc_ext(env, c), "subtree_com": c}
 
 
 def dof_index(model) -> dict[str, int]:

@@ -60,7 +60,7 @@ class QuadrupedEnv(UkemiMujocoEnv):
         key = list(self.model.keyframe_names).index("stand")
         self.init_qpos = np.array(self.model.key_qpos[key], dtype=np.float64)
         self._ctrl_stand = np.array(self.model.key_ctrl[key], dtype=np.float64)
-        self._x = np.concatenate([self.init_qpos, self.init_qvel])
+        self._set_x(np.concatenate([self.init_qpos, self.init_qvel]))
         self.action_space = spaces.Box(-1.0, 1.0, (self.model.nu,), np.float32)
 
     def _ctrl(self, action: np.ndarray) -> np.ndarray:

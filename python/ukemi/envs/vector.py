@@ -1,9 +1,10 @@
 """Batched vector environment: N copies of one ukemi env stepped in one Rust call.
 
-The physics of all sub-environments runs in a single ``_flat_rollout`` call (parallel in Rust,
-GIL released); observations, rewards and terminations are computed per sub-env by the same
-code as the single env, so sub-env ``i`` reproduces a single env seeded with ``seed + i`` and
-given the same actions, number for number.
+The full engine states of all sub-environments are the rows of one ``EnvStates`` and are
+stepped by a single call (parallel in Rust, GIL released); observations, rewards and
+terminations are computed per sub-env by the same code as the single env, so sub-env ``i``
+reproduces a single env seeded with ``seed + i`` and given the same actions, number for
+number.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ._physics import simulate
+from .. import _ukemi
+from ._physics import step_rows
 from .base import UkemiMujocoEnv
 
 
@@ -45,6 +47,9 @@ class BatchedEnvs:
         self.elapsed = np.zeros(self.num_envs, dtype=np.int64)
         first = self.envs[0]
         self.model, self.frame_skip = first.model, first.frame_skip
+        self.states = _ukemi.EnvStates(self.model, self.num_envs)
+        for i, e in enumerate(self.envs):
+            e._attach(self.states, i)
 
     def reset_one(self, i: int, seed: int | None = None, options: dict | None = None):
         self.elapsed[i] = 0
@@ -56,9 +61,8 @@ class BatchedEnvs:
         envs = [self.envs[i] for i in rows]
         acts = [e._check_action(a) for e, a in zip(envs, actions, strict=True)]
         befores = [e._snapshot() for e in envs]
-        xs = np.stack([e._x for e in envs])
         ctrls = np.stack([e._ctrl(a) for e, a in zip(envs, acts, strict=True)])
-        phys = simulate(self.model, xs, ctrls, self.frame_skip)
+        phys = step_rows(self.states, rows, ctrls, self.frame_skip)
         out = []
         for k, i in enumerate(rows):
             obs, rew, term, trunc, info = envs[k]._after_physics(acts[k], befores[k],
