@@ -64,6 +64,28 @@ def test_limits_hold_from_python():
     assert traj.qpos[:, 0].min() >= -0.2 - 1e-8
 
 
+def test_limit_range_wider_than_pi_passes_through_180_degrees():
+    """A hinge limited to (-1, 4.5) rad (wider than π, like the A1's hips) swings through
+    θ = π without a 2π jump: the angle is reported on its range's branch, energy is conserved
+    while it swings freely (no limit impulse), and the upper limit at 4.5 rad holds."""
+    b = ukemi.ModelBuilder(timestep=0.002)
+    b.add_body("bob", 1.0, (1e-3, 1e-3, 1e-3), pos=(0, 0, -1))
+    b.add_joint("h", "revolute", "world", "bob", axis=(0, 1, 0), child_anchor=(0, 0, 1),
+                range=(-1.0, 4.5))
+    m = b.compile()
+    s0 = m.make_state(qpos=[2.5], qvel=[3.0])  # rises towards the top at θ = π
+    tr = ukemi.rollout(m, s0, nsteps=400)
+    q = tr.qpos[:, 0]
+    assert np.abs(np.diff(q)).max() < 0.1, "the angle jumped"
+    assert q.max() > np.pi + 0.3, "passed through 180°"
+    assert q.max() <= 4.5 + 1e-8 and q.min() >= -1.0 - 1e-8
+    free = q < 4.5 - 1e-3  # before it reaches the upper limit
+    first_hit = int(np.argmin(free)) if not free.all() else len(free)
+    e = [m.make_state(qpos=qq, qvel=vv).energy() for qq, vv in
+         zip(tr.qpos[:first_hit], tr.qvel[:first_hit], strict=True)]
+    assert np.ptp(e) < 1e-3 * abs(e[0]), f"energy band {np.ptp(e):.2e} J"
+
+
 def test_contact_argument_errors():
     b = ukemi.ModelBuilder()
     b.add_body("a", 1.0, (0.1, 0.1, 0.1))

@@ -231,7 +231,8 @@ impl JointFrame {
     }
 
     /// Minimal position coordinates (length `joint.nq()`): free translations, then rotation
-    /// coordinates (angles in (-π, π], or the quaternion `q_joint` for a ball).
+    /// coordinates (angles in (-π, π] — or, for a limited angle, within π of its range's
+    /// midpoint — or the quaternion `q_joint` for a ball).
     pub fn coordinates(&self, joint: &Joint, out: &mut [f64]) {
         let t = joint.trans_dual.transpose() * self.delta;
         out[..joint.ntrans].copy_from_slice(&t.as_slice()[..joint.ntrans]);
@@ -261,6 +262,18 @@ impl JointFrame {
         // MuJoCo's `ref`: the reference configuration has qpos = qpos_ref (0 on quaternions)
         for (c, off) in out.iter_mut().zip(&joint.qpos_ref) {
             *c += off;
+        }
+        // A limited angle is reported on the branch centred on its range, not in (-π, π]: a
+        // range wider than π (the A1's hips, -60°..240°) must not see the angle jump by 2π
+        // inside it, which the limit rows and position servos would read as a 2π violation
+        // (measured: a hip crossing 180° snapped back with +370 J in one step).
+        if !matches!(joint.rot, RotDofs::Ball) {
+            for &(dof, lo, hi) in &joint.limits {
+                if dof >= joint.ntrans && hi - lo < std::f64::consts::TAU {
+                    let mid = 0.5 * (lo + hi);
+                    out[dof] = mid + wrap_angle(out[dof] - mid);
+                }
+            }
         }
     }
 
