@@ -43,7 +43,7 @@ pub use contact::ContactModel;
 pub use contact::geometry::Shape;
 pub use error::{Error, Result};
 pub use gradients::{
-    Adjoints, Coordinates, Jacobians, Linearization, PhaseTimes, Wrt, step_smoothed,
+    Adjoints, Coordinates, Jacobians, Linearization, PartialsMethod, PhaseTimes, Wrt, step_smoothed,
 };
 pub use joints::coordinates::{qpos, qvel, set_minimal};
 pub use joints::{Joint, JointKind};

@@ -336,7 +336,13 @@ impl Linearization {
         let t0 = Instant::now();
         let mut ws = Workspace::new(model);
         validate_inputs(model, &point.state, &ws, ctrl, &AppliedForces::default())?;
-        newton::prepare(model, &point.state, &mut ws, ctrl, &AppliedForces::default());
+        newton::prepare(
+            model,
+            &point.state,
+            &mut ws,
+            ctrl,
+            &AppliedForces::default(),
+        );
         ws.w.copy_from_slice(&stored.w);
         ws.active.copy_from_slice(&stored.active);
         newton::evaluate(model, &point.state, &mut ws, false, 0.0);
@@ -489,7 +495,11 @@ impl Linearization {
                 x.copy_from_slice(parts.r_z.column(c).as_slice());
                 self.ws.matrix.solve(p, &mut x);
                 for i in 0..ny {
-                    full[(i, c)] -= parts.w_cols.iter().map(|&k| parts.y_w[(i, k)] * x[k]).sum::<f64>();
+                    full[(i, c)] -= parts
+                        .w_cols
+                        .iter()
+                        .map(|&k| parts.y_w[(i, k)] * x[k])
+                        .sum::<f64>();
                 }
             }
         }
@@ -568,7 +578,10 @@ impl Linearization {
         let mut dw = vec![0.0; self.w.len()];
         for (c, tc) in t.iter().enumerate() {
             for &(s, l) in &parts.rows[c] {
-                for (d, r) in dw[s..s + l].iter_mut().zip(&parts.r_z.column(c).as_slice()[s..s + l]) {
+                for (d, r) in dw[s..s + l]
+                    .iter_mut()
+                    .zip(&parts.r_z.column(c).as_slice()[s..s + l])
+                {
                     *d += r * tc;
                 }
             }

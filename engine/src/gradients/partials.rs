@@ -66,7 +66,13 @@ impl Partials {
         let col = col.as_slice();
         self.rows[c]
             .iter()
-            .map(|&(s, l)| col[s..s + l].iter().zip(&v[s..s + l]).map(|(a, b)| a * b).sum::<f64>())
+            .map(|&(s, l)| {
+                col[s..s + l]
+                    .iter()
+                    .zip(&v[s..s + l])
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+            })
             .sum()
     }
 }
@@ -122,8 +128,13 @@ impl<'a> Probe<'a> {
         }
         if state {
             let (model, dir) = (self.base, &self.dir);
-            self.point
-                .perturbed(model, dir, sign * FD_STEP, &mut self.state, &mut self.scratch);
+            self.point.perturbed(
+                model,
+                dir,
+                sign * FD_STEP,
+                &mut self.state,
+                &mut self.scratch,
+            );
         }
     }
 
@@ -141,7 +152,14 @@ impl<'a> Probe<'a> {
     fn residual_full(&mut self, w: &[f64]) {
         let forces = AppliedForces::default();
         newton::prepare_forces(&self.model, &self.state, &mut self.ws, &self.ctrl, &forces);
-        newton::evaluate_in(&self.model, &self.state, &mut self.ws, w, &mut self.residual, 0.0);
+        newton::evaluate_in(
+            &self.model,
+            &self.state,
+            &mut self.ws,
+            w,
+            &mut self.residual,
+            0.0,
+        );
     }
 
     /// Residual at `w` with only the contact candidates `contacts` (of those `active`)
@@ -207,6 +225,7 @@ fn supports(model: &Model, probe: &mut Probe, inputs: &[Input], eps: &[f64]) -> 
                 probe.perturb(inputs, eps, &[c], 1.0);
                 let (touched, moved) = changed_bodies(model, &probe.point.state, &probe.state);
                 probe.restore(inputs, &[c]);
+
                 Support::new(model, &graph, &touched, &moved, &[])
             }
             Input::Ctrl(i) => {
@@ -300,13 +319,21 @@ pub(super) fn partials(
                     cs
                 })
                 .collect();
-            residual_columns(&mut probe, &mut out, inputs, &eps, w, &groups, Some(&contacts));
-            output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base);
+            residual_columns(
+                &mut probe,
+                &mut out,
+                inputs,
+                &eps,
+                w,
+                &groups,
+                Some(&contacts),
+            );
+            output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, method);
             return out;
         }
     };
     residual_columns(&mut probe, &mut out, inputs, &eps, w, &groups, None);
-    output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base);
+    output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, method);
     out
 }
 
@@ -349,7 +376,7 @@ fn residual_columns(
 }
 
 /// `∂Y/∂z` per column (the output map alone: only state columns and the time step enter it)
-/// and `∂Y/∂w` per body velocity.
+/// and `∂Y/∂w` per body velocity component.
 fn output_partials(
     probe: &mut Probe,
     out: &mut Partials,
@@ -357,6 +384,7 @@ fn output_partials(
     eps: &[f64],
     w: &[f64],
     out_base: &Point,
+    method: PartialsMethod,
 ) {
     let ny = out.y_z.nrows();
     let (mut yp, mut ym) = (vec![0.0; ny], vec![0.0; ny]);
@@ -373,15 +401,65 @@ fn output_partials(
             out.y_z[(i, c)] = (yp[i] - ym[i]) / (2.0 * eps[c]);
         }
     }
+    // ∂Y/∂w: bodies whose outputs do not overlap are perturbed together
+    let model = probe.base;
+    let rows = output_rows(model, out_base.coords);
+    let groups = match method {
+        PartialsMethod::Coloured => colour(&rows, ny),
+        PartialsMethod::ColumnByColumn => (0..rows.len()).map(|b| vec![b]).collect(),
+    };
+    let slot = |b: usize| body_node(b + 1).map_or(0, |n| model.topology.pattern.offset(n));
     let mut wp = w.to_vec();
-    for &k in &out.w_cols {
-        for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
-            wp[k] = w[k] + sign * FD_STEP;
-            probe.output(&wp, out_base, y);
-        }
-        wp[k] = w[k];
-        for i in 0..ny {
-            out.y_w[(i, k)] = (yp[i] - ym[i]) / (2.0 * FD_STEP);
+    for group in &groups {
+        for comp in 0..6 {
+            for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
+                for &b in group {
+                    wp[slot(b) + comp] = w[slot(b) + comp] + sign * FD_STEP;
+                }
+                probe.output(&wp, out_base, y);
+            }
+            for &b in group {
+                let k = slot(b) + comp;
+                wp[k] = w[k];
+                let all = [0..ny];
+                let only = rows[b].nodes.iter().map(|&i| i..i + 1).collect::<Vec<_>>();
+                let ranges: &[std::ops::Range<usize>] = match method {
+                    PartialsMethod::Coloured => &only,
+                    PartialsMethod::ColumnByColumn => &all,
+                };
+                for i in ranges.iter().flat_map(|r| r.clone()) {
+                    out.y_w[(i, k)] = (yp[i] - ym[i]) / (2.0 * FD_STEP);
+                }
+            }
         }
     }
+}
+
+/// Output rows (as a [`Support`]'s `nodes`) that each moving body's next velocities reach:
+/// its own 12 in maximal coordinates; in minimal ones the dofs of the joints it is the parent
+/// or child of (a joint's coordinates and rates are those of its child relative to its parent).
+fn output_rows(model: &Model, coords: Coordinates) -> Vec<Support> {
+    let nv = model.nv;
+    (1..model.nbody())
+        .map(|b| {
+            let nodes = match coords {
+                Coordinates::Maximal => (12 * (b - 1)..12 * b).collect(),
+                Coordinates::Minimal => {
+                    let mut rows: Vec<usize> = model
+                        .joints
+                        .iter()
+                        .filter(|j| !j.is_loop && (j.parent == b || j.child == b))
+                        .flat_map(|j| j.qvel_adr..j.qvel_adr + j.nfree())
+                        .flat_map(|i| [i, nv + i])
+                        .collect();
+                    rows.sort_unstable();
+                    rows
+                }
+            };
+            Support {
+                nodes,
+                contacts: vec![],
+            }
+        })
+        .collect()
 }

@@ -3,8 +3,9 @@
 //!
 //! A perturbed input changes the residual only near the bodies it touches: their body rows and
 //! those of their neighbours in the *interaction graph* (bodies sharing a joint, a joint
-//! coupling, an actuator transmission or a contact candidate), the joint, limit and coupling
-//! nodes of their joints, and the nodes of the contact candidates whose geometry it moves.
+//! coupling or an actuator transmission), the joint, limit and coupling nodes of their joints,
+//! and the nodes of the contact candidates whose geometry it moves together with the rows of
+//! those candidates' two bodies.
 //! Columns whose supports are disjoint can be perturbed in one residual evaluation and
 //! separated afterwards by their supports; the graph is fixed by the model's topology.
 use crate::model::Model;
@@ -13,7 +14,8 @@ use crate::model::topology_body_node as body_node;
 
 /// Which bodies interact with which, and which contact candidates each body and geom has.
 pub(super) struct Interactions {
-    /// Neighbours of each body (itself included), sorted; world (0) left out.
+    /// Neighbours of each body through joints, couplings and transmissions (itself included),
+    /// sorted.
     nbrs: Vec<Vec<usize>>,
     /// Contact candidates of each body.
     body_contacts: Vec<Vec<usize>>,
@@ -42,8 +44,9 @@ impl Interactions {
         let mut body_contacts = vec![Vec::new(); nb];
         let mut geom_contacts = vec![Vec::new(); model.geoms.len()];
         for (c, contact) in model.contacts.iter().enumerate() {
+            // NOTE: no link: a contact changes only when its geometry moves, and then its own
+            // rows and the rows of its two bodies are in the support (see `Support::new`)
             let [a, b] = model.topology.contact_bodies[c];
-            link(&[a, b]);
             body_contacts[a].push(c);
             if b != a {
                 body_contacts[b].push(c);
@@ -155,10 +158,7 @@ pub(super) fn colour(supports: &[Support], nnodes: usize) -> Vec<Vec<usize>> {
     let mut used: Vec<Vec<bool>> = Vec::new();
     for c in order {
         let nodes = &supports[c].nodes;
-        let k = match used
-            .iter()
-            .position(|u| nodes.iter().all(|&n| !u[n]))
-        {
+        let k = match used.iter().position(|u| nodes.iter().all(|&n| !u[n])) {
             Some(k) => k,
             None => {
                 groups.push(Vec::new());
