@@ -1,6 +1,7 @@
 //! Per-phase timing of step Jacobians on an MJCF model (Table V workload: dt = 0.01, random
 //! controls in the control range, full minimal-coordinate A and B every step):
-//! `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml [STEPS] [KAPPA_GRAD]`.
+//! `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml [STEPS] [KAPPA_GRAD|none] [coloured]`
+//! (`coloured` skips the column-by-column reference).
 //! Linearises every step twice, with the coloured partials and with the column-by-column
 //! reference, and prints for each the mean milliseconds per step of the solve, the
 //! central-path move, the factorisation, the partial derivatives and the back-substitutions,
@@ -47,7 +48,8 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let path = args.get(1).expect("model path");
     let steps: usize = args.get(2).map_or(20, |s| s.parse().unwrap());
-    let kappa: Option<f64> = args.get(3).map(|s| s.parse().unwrap());
+    let kappa: Option<f64> = args.get(3).and_then(|s| s.parse().ok());
+    let with_reference = args.get(4).is_none_or(|s| s != "coloured");
     let model = mjcf::load_path(std::path::Path::new(path)).unwrap().model;
     let mut opts = model.options.clone();
     opts.timestep = 0.01;
