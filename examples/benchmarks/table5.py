@@ -7,6 +7,10 @@ its reference figures) on the same MJCF file, in the same run, each timing the m
     .venv/bin/python examples/benchmarks/table5.py            # reduced: 100 steps
     .venv/bin/python examples/benchmarks/table5.py --steps 1000 --repeats 5   # the README's
     .venv/bin/python examples/benchmarks/table5.py --only shared/   # the four shared robots
+    .venv/bin/python examples/benchmarks/table5.py --kappa-grad 1e-4   # smoothed gradients
+
+Per-phase timings of the Jacobians (solve, central path, factorisation, partials,
+back-substitution): `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml`.
 """
 
 from __future__ import annotations
@@ -34,14 +38,15 @@ def random_ctrls(lo, hi, steps, rng):
     return lo + (hi - lo) * rng.random((steps, len(lo)))
 
 
-def bench_ukemi(model, ctrls, with_jac):
+def bench_ukemi(model, ctrls, with_jac, kappa_grad):
     s = model.make_state(key=model.keyframe_names[0]) if model.keyframe_names else model.make_state()
     t0 = time.perf_counter()
     fails = 0
     for u in ctrls:
         if with_jac:
             try:
-                s = ukemi.step_jacobians(model, s, u, wrt=("state", "ctrl")).next_state
+                s = ukemi.step_jacobians(model, s, u, wrt=("state", "ctrl"),
+                                         kappa_grad=kappa_grad).next_state
             except ukemi.ConvergenceError:
                 fails += 1
                 s, _ = ukemi.step(model, s, u, on_failure="return")
@@ -51,12 +56,12 @@ def bench_ukemi(model, ctrls, with_jac):
     return time.perf_counter() - t0, fails
 
 
-def bench_rollout_vjp(model, ctrls):
+def bench_rollout_vjp(model, ctrls, kappa_grad):
     s = model.make_state(key=model.keyframe_names[0]) if model.keyframe_names else model.make_state()
     adj = np.ones((len(ctrls) + 1, 2 * model.nv))
     t0 = time.perf_counter()
     try:
-        ukemi.rollout_vjp(model, s, ctrls, adj, params=False)
+        ukemi.rollout_vjp(model, s, ctrls, adj, params=False, kappa_grad=kappa_grad)
         ok = True
     except ukemi.ConvergenceError:
         ok = False
@@ -89,7 +94,10 @@ def main():
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--repeats", type=int, default=1, help="timings are the mean of this many runs")
     ap.add_argument("--only", default="", help="run models whose name contains this")
+    ap.add_argument("--kappa-grad", type=float, default=None,
+                    help="central-path parameter of the gradients (default: exact, None)")
     args = ap.parse_args()
+    kappa = args.kappa_grad
     mean = lambda f: [sum(x) / args.repeats for x in zip(*(f() for _ in range(args.repeats)))]
     rng = np.random.default_rng(0)
     print(f"{'model':24s} {'nv':>4s} {'nu':>3s} | {'ukemi fwd':>10s} {'mj fwd':>9s} | "
@@ -111,9 +119,9 @@ def main():
         lo = np.where(np.isfinite(r[:, 0]), r[:, 0], -1.0) if model.nu else np.zeros(0)
         hi = np.where(np.isfinite(r[:, 1]), r[:, 1], 1.0) if model.nu else np.zeros(0)
         ctrls = random_ctrls(lo, hi, args.steps, rng)
-        tf, ff = mean(lambda: bench_ukemi(model, ctrls, False))
-        tj, fj = mean(lambda: bench_ukemi(model, ctrls, True))
-        tv, okv = mean(lambda: bench_rollout_vjp(model, ctrls))
+        tf, ff = mean(lambda: bench_ukemi(model, ctrls, False, kappa))
+        tj, fj = mean(lambda: bench_ukemi(model, ctrls, True, kappa))
+        tv, okv = mean(lambda: bench_rollout_vjp(model, ctrls, kappa))
         mf, mj = mean(lambda: (bench_mujoco(path, ctrls, False), bench_mujoco(path, ctrls, True)))
         print(f"{name:24s} {model.nv:4d} {model.nu:3d} | {tf:9.3f}s {mf:8.3f}s | {tj:9.3f}s {mj:8.3f}s "
               f"{tj / mj:6.2f} | {tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f}"

@@ -13,9 +13,11 @@
 //! a vector-Jacobian product one transposed back-substitution in all.
 //!
 //! **κ-smoothing.** With `kappa_grad = Some(κ)` the gradient point is the *central-path point*
-//! at κ: starting from the hard solution (solved to `kappa_tol`), Newton's method on
-//! `R(w; κ) = 0` with every complementarity pair held at `b ∘ c = κ e`
-//! ([`crate::solver::ipm`]'s `solve_central`). The derivatives are those of that smoothed step
+//! at κ, the solution of `R(w; κ) = 0` with every complementarity pair held at `b ∘ c = κ e`:
+//! after the hard solve (to `kappa_tol`), [`crate::solver::ipm`]'s `solve_central` restarts the
+//! inequality variables at the neutral point and runs the predictor-corrector with centring
+//! floored at κ, with an iteration budget of at least [`CENTRAL_MAX_ITER`] (from the neutral
+//! point it needs more iterations than a warm-started step). The derivatives are those of that smoothed step
 //! map (contact forces act at a distance ~κ/γ, friction is smoothed), while the returned next
 //! state is still the hard one. `None` differentiates the hard solution itself (exact but
 //! discontinuous through contact changes, and ill-conditioned at grazing contact).
