@@ -71,6 +71,7 @@ fn main() {
     };
     let (mut coloured, mut reference) = (Sum::default(), Sum::default());
     let (mut failed, mut worst) = (0, 0.0f64);
+    let (mut plain, mut with_jac) = (0.0, 0.0);
     for _ in 0..steps {
         let ctrl: Vec<f64> = model
             .actuators
@@ -84,15 +85,29 @@ fn main() {
             let c = Coordinates::Minimal;
             Linearization::with_method(&model, &state, &ctrl, c, Wrt::STATE_CTRL, kappa, m)
         };
-        let both = lin(PartialsMethod::Coloured).and_then(|a| {
+        // a plain step from the same state, for the gradient overhead
+        let t0 = std::time::Instant::now();
+        let _ = step(
+            &model,
+            &mut state.clone(),
+            &mut Workspace::new(&model),
+            &ctrl,
+        );
+        plain += t0.elapsed().as_secs_f64();
+        let t0 = std::time::Instant::now();
+        let coloured_lin = lin(PartialsMethod::Coloured).and_then(|mut a| {
+            let ja = a.jacobians(&model)?;
+            Ok((a, ja))
+        });
+        with_jac += t0.elapsed().as_secs_f64();
+        let both = coloured_lin.and_then(|(a, ja)| {
             let b = with_reference
                 .then(|| lin(PartialsMethod::ColumnByColumn))
                 .transpose()?;
-            Ok((a, b))
+            Ok((a, ja, b))
         });
         match both {
-            Ok((mut a, b)) => {
-                let ja = a.jacobians(&model).unwrap();
+            Ok((a, ja, b)) => {
                 coloured.add(&a);
                 if let Some(mut b) = b {
                     let jb = b.jacobians(&model).unwrap();
@@ -118,6 +133,12 @@ fn main() {
         model.nv,
         model.nu(),
         model.ncontact()
+    );
+    let n = steps as f64;
+    println!(
+        "  plain step {:.2} ms/step, linearisation + Jacobians {:.2} ms/step (coloured)",
+        1e3 * plain / n,
+        1e3 * with_jac / n
     );
     coloured.print("coloured");
     if with_reference {

@@ -437,7 +437,7 @@ impl Linearization {
         let np = inputs.len() - nx - nu;
         let w = ws.w.clone();
         let t0 = Instant::now();
-        let parts = partials::partials(model, &point, ctrl, &w, &ws.active, &inputs, method);
+        let parts = partials::partials(model, &point, ctrl, &w, &ws.active, &inputs, method)?;
         times.partials = t0.elapsed().as_secs_f64();
         Ok(Linearization {
             coords,

@@ -225,7 +225,6 @@ fn supports(model: &Model, probe: &mut Probe, inputs: &[Input], eps: &[f64]) -> 
                 probe.perturb(inputs, eps, &[c], 1.0);
                 let (touched, moved) = changed_bodies(model, &probe.point.state, &probe.state);
                 probe.restore(inputs, &[c]);
-
                 Support::new(model, &graph, &touched, &moved, &[])
             }
             Input::Ctrl(i) => {
@@ -275,7 +274,7 @@ pub(super) fn partials(
     active: &[bool],
     inputs: &[Input],
     method: PartialsMethod,
-) -> Partials {
+) -> crate::Result<Partials> {
     let (nw, ny, nz) = (w.len(), point.coords.dim(model), inputs.len());
     let eps = steps(model, inputs);
     let mut probe = Probe::new(model, point, ctrl, active);
@@ -295,9 +294,7 @@ pub(super) fn partials(
     // base of the output tangent: the next state at the gradient point
     let mut base_next = point.state.clone();
     next_state_into(model, &point.state, w, &mut base_next);
-    let Ok(mut out_base) = Point::new(model, &base_next, Coordinates::Maximal) else {
-        return out;
-    };
+    let mut out_base = Point::new(model, &base_next, Coordinates::Maximal)?;
     out_base.coords = point.coords;
     out_base.state = base_next;
     let groups: Vec<Vec<usize>> = match method {
@@ -329,12 +326,12 @@ pub(super) fn partials(
                 Some(&contacts),
             );
             output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, method);
-            return out;
+            return Ok(out);
         }
     };
     residual_columns(&mut probe, &mut out, inputs, &eps, w, &groups, None);
     output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, method);
-    out
+    Ok(out)
 }
 
 /// `∂R/∂z` by central differences, one residual evaluation per group and sign; with
@@ -366,8 +363,9 @@ fn residual_columns(
         for &c in group {
             let inv = 1.0 / (2.0 * eps[c]);
             for &(s, l) in &out.rows[c] {
-                for i in s..s + l {
-                    out.r_z[(i, c)] = (plus[i] - probe.residual[i]) * inv;
+                let (p, m) = (&plus[s..s + l], &probe.residual[s..s + l]);
+                for (i, (p, m)) in p.iter().zip(m).enumerate() {
+                    out.r_z[(s + i, c)] = (p - m) * inv;
                 }
             }
         }
@@ -403,10 +401,20 @@ fn output_partials(
     }
     // ∂Y/∂w: bodies whose outputs do not overlap are perturbed together
     let model = probe.base;
-    let rows = output_rows(model, out_base.coords);
-    let groups = match method {
-        PartialsMethod::Coloured => colour(&rows, ny),
-        PartialsMethod::ColumnByColumn => (0..rows.len()).map(|b| vec![b]).collect(),
+    let (rows, groups) = match method {
+        PartialsMethod::Coloured => {
+            let rows = output_rows(model, out_base.coords);
+            let groups = colour(&rows, ny);
+            (rows, groups)
+        }
+        PartialsMethod::ColumnByColumn => {
+            let all = Support {
+                nodes: (0..ny).collect(),
+                contacts: vec![],
+            };
+            let n = model.nbody() - 1;
+            (vec![all; n], (0..n).map(|b| vec![b]).collect())
+        }
     };
     let slot = |b: usize| body_node(b + 1).map_or(0, |n| model.topology.pattern.offset(n));
     let mut wp = w.to_vec();
@@ -421,13 +429,7 @@ fn output_partials(
             for &b in group {
                 let k = slot(b) + comp;
                 wp[k] = w[k];
-                let all = [0..ny];
-                let only = rows[b].nodes.iter().map(|&i| i..i + 1).collect::<Vec<_>>();
-                let ranges: &[std::ops::Range<usize>] = match method {
-                    PartialsMethod::Coloured => &only,
-                    PartialsMethod::ColumnByColumn => &all,
-                };
-                for i in ranges.iter().flat_map(|r| r.clone()) {
+                for &i in &rows[b].nodes {
                     out.y_w[(i, k)] = (yp[i] - ym[i]) / (2.0 * FD_STEP);
                 }
             }
