@@ -14,19 +14,19 @@
 //!
 //! **κ-smoothing.** With `kappa_grad = Some(κ)` the gradient point is the *central-path point*
 //! at κ, the solution of `R(w; κ) = 0` with every complementarity pair held at `b ∘ c = κ e`:
-//! after the hard solve (to `kappa_tol`), [`crate::solver::ipm`]'s `solve_central` restarts the
+//! after the hard solve (to `kappa_tol`), `solver::ipm::solve_central` restarts the
 //! inequality variables at the neutral point and runs the predictor-corrector with centring
-//! floored at κ, with an iteration budget of at least [`CENTRAL_MAX_ITER`] (from the neutral
-//! point it needs more iterations than a warm-started step). The derivatives are those of that smoothed step
-//! map (contact forces act at a distance ~κ/γ, friction is smoothed), while the returned next
-//! state is still the hard one. `None` differentiates the hard solution itself (exact but
+//! floored at κ, with an iteration budget of at least `CENTRAL_MAX_ITER` = 200 (from the
+//! neutral point it needs more iterations than a warm-started step). The derivatives are those
+//! of that smoothed step map (contact forces act at a distance ~κ/γ, friction is smoothed),
+//! while the returned next state is still the hard one. `None` differentiates the hard solution itself (exact but
 //! discontinuous through contact changes, and ill-conditioned at grazing contact).
 //!
 //! **Partials.** `∂R/∂z` and `∂Y/∂z, ∂Y/∂w` are derivatives of smooth, explicit functions at a
 //! fixed `w`; they are taken by central differences of the engine's own residual and output
-//! map ([`partials`]), so every physical term of the residual is differentiated consistently.
+//! map (`partials.rs`), so every physical term of the residual is differentiated consistently.
 //! Columns whose residual rows do not overlap share one evaluation (a colouring of the
-//! body–joint–contact graph, [`sparsity`]), and each evaluation refreshes only the contact
+//! body–joint–contact graph, `sparsity.rs`), and each evaluation refreshes only the contact
 //! candidates the perturbation moves. Only the non-smooth part, the solution map `w(z)`, needs
 //! the implicit function theorem.
 //!
