@@ -173,3 +173,39 @@ pub(super) fn colour(supports: &[Support], nnodes: usize) -> Vec<Vec<usize>> {
     }
     groups
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colour_groups_are_disjoint_and_cover_every_column() {
+        // a chain of supports {i, i+1} over 10 nodes, plus one column touching everything
+        let mut sup: Vec<Support> = (0..9)
+            .map(|i| Support {
+                nodes: vec![i, i + 1],
+                contacts: vec![],
+            })
+            .collect();
+        sup.push(Support {
+            nodes: (0..10).collect(),
+            contacts: vec![],
+        });
+        let groups = colour(&sup, 10);
+        let mut seen = vec![false; sup.len()];
+        for g in &groups {
+            let mut used = [false; 10];
+            for &c in g {
+                assert!(!seen[c], "column {c} coloured twice");
+                seen[c] = true;
+                for &n in &sup[c].nodes {
+                    assert!(!used[n], "group {g:?} shares node {n}");
+                    used[n] = true;
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s));
+        // the full column alone, the chain in two alternating groups
+        assert_eq!(groups.len(), 3);
+    }
+}
