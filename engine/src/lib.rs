@@ -43,7 +43,9 @@ pub mod urdf;
 pub use contact::ContactModel;
 pub use contact::geometry::Shape;
 pub use error::{Error, Result};
-pub use gradients::{Adjoints, Coordinates, Jacobians, Linearization, Wrt, step_smoothed};
+pub use gradients::{
+    Adjoints, Coordinates, Jacobians, Linearization, PartialsMethod, PhaseTimes, Wrt, step_smoothed,
+};
 pub use joints::coordinates::{qpos, qvel, set_minimal};
 pub use joints::{Joint, JointKind};
 pub use model::{

@@ -417,3 +417,133 @@ proptest! {
         check(&model, &s, &[push], Coordinates::Minimal, Some(1e-4), 1e-5);
     }
 }
+
+/// Jacobians from the coloured partials (columns with disjoint row supports perturbed together,
+/// contact candidates re-evaluated only where they move) against one full residual evaluation
+/// per column: the same central differences, so they agree to round-off. Returns the largest
+/// relative difference.
+fn coloured_vs_reference(
+    model: &Model,
+    state: &State,
+    ctrl: &[f64],
+    coords: Coordinates,
+    kappa: Option<f64>,
+) -> f64 {
+    use ukemi_engine::PartialsMethod;
+    let jac = |method| {
+        let mut lin =
+            Linearization::with_method(model, state, ctrl, coords, Wrt::ALL, kappa, method)
+                .unwrap();
+        (lin.jacobians(model).unwrap(), lin.residual_evaluations())
+    };
+    let ((c, nc), (r, nr)) = (
+        jac(PartialsMethod::Coloured),
+        jac(PartialsMethod::ColumnByColumn),
+    );
+    assert!(nc < nr, "colouring saved no evaluations: {nc} vs {nr}");
+    let mut worst = 0.0f64;
+    for (name, x, y) in [("A", &c.a, &r.a), ("B", &c.b, &r.b), ("C", &c.c, &r.c)] {
+        let e = rel_err(x, y);
+        assert!(
+            e < 1e-8,
+            "{coords:?} kappa {kappa:?}: {name} differs by {e:e}"
+        );
+        worst = worst.max(e);
+    }
+    eprintln!(
+        "{coords:?} kappa {kappa:?}: {nc} vs {nr} residual evaluations, max rel diff {worst:e}"
+    );
+    worst
+}
+
+/// Deterministic controls in each actuator's range.
+fn some_ctrl(model: &Model, k: usize) -> Vec<f64> {
+    model
+        .actuators
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let (lo, hi) = a.ctrlrange.unwrap_or((-1.0, 1.0));
+            lo + (hi - lo) * (0.5 + 0.4 * ((i * 7 + k * 3) as f64).sin())
+        })
+        .collect()
+}
+
+#[test]
+fn coloured_partials_equal_column_by_column_on_a_humanoid() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models/humanoid.xml");
+    if !path.exists() {
+        eprintln!("skipped: {} not found", path.display());
+        return;
+    }
+    let m = ukemi_engine::mjcf::load_path(&path).unwrap().model;
+    let mut o = m.options.clone();
+    o.timestep = 0.01;
+    let m = m.with_options(o).unwrap();
+    // a generic moving state: squat keyframe, a few steps of varied controls
+    let key = &m.keyframes[0];
+    let mut s = State::reference(&m);
+    ukemi_engine::set_minimal(&m, &mut s, &key.qpos, &key.qvel).unwrap();
+    let mut ws = Workspace::new(&m);
+    for k in 0..3 {
+        step(&m, &mut s, &mut ws, &some_ctrl(&m, k)).unwrap();
+    }
+    let u = some_ctrl(&m, 3);
+    for coords in [Coordinates::Minimal, Coordinates::Maximal] {
+        coloured_vs_reference(&m, &s, &u, coords, None);
+    }
+    coloured_vs_reference(&m, &s, &u, Coordinates::Minimal, Some(1e-4));
+}
+
+#[test]
+fn coloured_partials_equal_column_by_column_with_contacts() {
+    // a box on the floor with a ball resting on it and a limited, damped, actuated slider:
+    // body-body, body-floor and limit rows, every contact model
+    for cm in [
+        ContactModel::Nonlinear,
+        ContactModel::Linear,
+        ContactModel::Impact,
+    ] {
+        let b = contact_scenes::floor(ModelBuilder::new().timestep(0.01), 0.5);
+        let half = nalgebra::Vector3::new(0.2, 0.2, 0.1);
+        let b = contact_scenes::free_body(
+            b,
+            "box",
+            2.0,
+            Shape::Box { half_extents: half },
+            [0.0, 0.0, 0.1],
+            [1.0, 0.0, 0.0, 0.0],
+            0.5,
+            cm,
+        );
+        let b = contact_scenes::free_body(
+            b,
+            "ball",
+            0.5,
+            Shape::Sphere { radius: 0.05 },
+            [0.05, 0.0, 0.25],
+            [1.0, 0.0, 0.0, 0.0],
+            0.5,
+            cm,
+        );
+        let mut slide = JointSpec::new("slide", JointKind::Prismatic, "box", "puck")
+            .axis([1.0, 0.0, 0.0])
+            .anchors([0.0, 0.0, 0.0], [0.0; 3])
+            .damping(0.3);
+        slide.range = Some(vec![(-0.1, 0.1)]);
+        let mut push = ActuatorSpec::motor("push", "slide", 0, 2.0);
+        push.ctrlrange = Some((-1.0, 1.0));
+        let b = b
+            .body(BodySpec::new("puck", 0.3, [0.01, 0.01, 0.01]).pos([0.0, 0.0, 0.1]))
+            .joint(slide)
+            .actuator(push);
+        let m = tight(b.compile().unwrap());
+        let s = settled(&m, &vec![0.1; m.nv]);
+        for coords in [Coordinates::Minimal, Coordinates::Maximal] {
+            for kappa in [None, Some(1e-4)] {
+                coloured_vs_reference(&m, &s, &[0.4], coords, kappa);
+            }
+        }
+    }
+}

@@ -7,6 +7,10 @@ its reference figures) on the same MJCF file, in the same run, each timing the m
     .venv/bin/python examples/benchmarks/table5.py            # reduced: 100 steps
     .venv/bin/python examples/benchmarks/table5.py --steps 1000 --repeats 5   # the README's
     .venv/bin/python examples/benchmarks/table5.py --only shared/   # the four shared robots
+    .venv/bin/python examples/benchmarks/table5.py --kappa-grad 1e-4   # smoothed gradients
+
+Per-phase timings of the Jacobians (solve, central path, factorisation, partials,
+back-substitution): `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml`.
 """
 
 from __future__ import annotations
@@ -34,29 +38,40 @@ def random_ctrls(lo, hi, steps, rng):
     return lo + (hi - lo) * rng.random((steps, len(lo)))
 
 
-def bench_ukemi(model, ctrls, with_jac):
+def bench_ukemi(model, ctrls, with_jac, kappa_grad):
+    """Seconds for the rollout, failed steps, and (with Jacobians) the gradient overhead: the
+    time of step_jacobians minus that of a plain step from the same state, summed over the
+    steps whose Jacobians succeeded."""
     s = model.make_state(key=model.keyframe_names[0]) if model.keyframe_names else model.make_state()
-    t0 = time.perf_counter()
+    total = overhead = 0.0
     fails = 0
     for u in ctrls:
         if with_jac:
+            t0 = time.perf_counter()
+            ukemi.step(model, s, u, on_failure="return")
+            t1 = time.perf_counter()
             try:
-                s = ukemi.step_jacobians(model, s, u, wrt=("state", "ctrl")).next_state
+                s = ukemi.step_jacobians(model, s, u, wrt=("state", "ctrl"),
+                                         kappa_grad=kappa_grad).next_state
+                overhead += (time.perf_counter() - t1) - (t1 - t0)
             except ukemi.ConvergenceError:
                 fails += 1
                 s, _ = ukemi.step(model, s, u, on_failure="return")
+            total += time.perf_counter() - t1
         else:
+            t0 = time.perf_counter()
             s, info = ukemi.step(model, s, u, on_failure="return")
+            total += time.perf_counter() - t0
             fails += not info.converged
-    return time.perf_counter() - t0, fails
+    return total, fails, overhead
 
 
-def bench_rollout_vjp(model, ctrls):
+def bench_rollout_vjp(model, ctrls, kappa_grad):
     s = model.make_state(key=model.keyframe_names[0]) if model.keyframe_names else model.make_state()
     adj = np.ones((len(ctrls) + 1, 2 * model.nv))
     t0 = time.perf_counter()
     try:
-        ukemi.rollout_vjp(model, s, ctrls, adj, params=False)
+        ukemi.rollout_vjp(model, s, ctrls, adj, params=False, kappa_grad=kappa_grad)
         ok = True
     except ukemi.ConvergenceError:
         ok = False
@@ -89,11 +104,15 @@ def main():
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--repeats", type=int, default=1, help="timings are the mean of this many runs")
     ap.add_argument("--only", default="", help="run models whose name contains this")
+    ap.add_argument("--kappa-grad", type=float, default=None,
+                    help="central-path parameter of the gradients (default: exact, None)")
     args = ap.parse_args()
+    kappa = args.kappa_grad
     mean = lambda f: [sum(x) / args.repeats for x in zip(*(f() for _ in range(args.repeats)))]
     rng = np.random.default_rng(0)
     print(f"{'model':24s} {'nv':>4s} {'nu':>3s} | {'ukemi fwd':>10s} {'mj fwd':>9s} | "
-          f"{'ukemi A,B':>10s} {'mj FD':>9s} {'ratio':>6s} | {'rollout VJP':>11s} {'/mj FD':>7s}")
+          f"{'ukemi A,B':>10s} {'mj FD':>9s} {'ratio':>6s} {'grad ovh':>9s} | "
+          f"{'rollout VJP':>11s} {'/mj FD':>7s}")
     for name, path in models():
         if args.only not in name:
             continue
@@ -111,14 +130,15 @@ def main():
         lo = np.where(np.isfinite(r[:, 0]), r[:, 0], -1.0) if model.nu else np.zeros(0)
         hi = np.where(np.isfinite(r[:, 1]), r[:, 1], 1.0) if model.nu else np.zeros(0)
         ctrls = random_ctrls(lo, hi, args.steps, rng)
-        tf, ff = mean(lambda: bench_ukemi(model, ctrls, False))
-        tj, fj = mean(lambda: bench_ukemi(model, ctrls, True))
-        tv, okv = mean(lambda: bench_rollout_vjp(model, ctrls))
+        tf, ff, _ = mean(lambda: bench_ukemi(model, ctrls, False, kappa))
+        tj, fj, oj = mean(lambda: bench_ukemi(model, ctrls, True, kappa))
+        tv, okv = mean(lambda: bench_rollout_vjp(model, ctrls, kappa))
         mf, mj = mean(lambda: (bench_mujoco(path, ctrls, False), bench_mujoco(path, ctrls, True)))
         print(f"{name:24s} {model.nv:4d} {model.nu:3d} | {tf:9.3f}s {mf:8.3f}s | {tj:9.3f}s {mj:8.3f}s "
-              f"{tj / mj:6.2f} | {tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f}"
+              f"{tj / mj:6.2f} {oj:8.3f}s | {tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f}"
               + (f"   ({ff} fwd / {fj} jac steps unconverged)" if ff or fj else ""))
     print("ratio = ukemi/MuJoCo (target: A,B ≤ 0.5; rollout VJP ≤ 0.1 of MuJoCo's FD); "
+          "grad ovh = step_jacobians minus a plain step from the same states (successful ones); "
           "* = rollout VJP stopped at an unconverged step")
 
 

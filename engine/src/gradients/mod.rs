@@ -13,39 +13,54 @@
 //! a vector-Jacobian product one transposed back-substitution in all.
 //!
 //! **κ-smoothing.** With `kappa_grad = Some(κ)` the gradient point is the *central-path point*
-//! at κ: starting from the hard solution (solved to `kappa_tol`), Newton's method on
-//! `R(w; κ) = 0` with every complementarity pair held at `b ∘ c = κ e`
-//! ([`crate::solver::ipm`]'s `solve_central`). The derivatives are those of that smoothed step
-//! map (contact forces act at a distance ~κ/γ, friction is smoothed), while the returned next
-//! state is still the hard one. `None` differentiates the hard solution itself (exact but
+//! at κ, the solution of `R(w; κ) = 0` with every complementarity pair held at `b ∘ c = κ e`:
+//! after the hard solve (to `kappa_tol`), `solver::ipm::solve_central` restarts the
+//! inequality variables at the neutral point and runs the predictor-corrector with centring
+//! floored at κ, with an iteration budget of at least `CENTRAL_MAX_ITER` = 200 (from the
+//! neutral point it needs more iterations than a warm-started step). The derivatives are those
+//! of that smoothed step map (contact forces act at a distance ~κ/γ, friction is smoothed),
+//! while the returned next state is still the hard one. `None` differentiates the hard solution itself (exact but
 //! discontinuous through contact changes, and ill-conditioned at grazing contact).
 //!
 //! **Partials.** `∂R/∂z` and `∂Y/∂z, ∂Y/∂w` are derivatives of smooth, explicit functions at a
 //! fixed `w`; they are taken by central differences of the engine's own residual and output
-//! map (step 1e-6 in state units; relative error ~1e-9), so every physical term of the residual
-//! is differentiated consistently. Only the non-smooth part, the solution map `w(z)`, needs the
-//! implicit function theorem. Replacing the partials with analytic ones is a speed upgrade that
-//! the tests in this module pin down.
+//! map (`partials.rs`), so every physical term of the residual is differentiated consistently.
+//! Columns whose residual rows do not overlap share one evaluation (a colouring of the
+//! body–joint–contact graph, `sparsity.rs`), and each evaluation refreshes only the contact
+//! candidates the perturbation moves. Only the non-smooth part, the solution map `w(z)`, needs
+//! the implicit function theorem.
+//!
+//! **Back-substitution.** `∂Y/∂w` reads only the body velocities, and each column of `∂R/∂z`
+//! is non-zero only on its support, so a Jacobian is formed from `min(ny, nz)` solves (transposed
+//! when there are fewer outputs than inputs) and sparse products.
 pub mod flat;
+mod partials;
 mod rollout;
+mod sparsity;
 pub mod tangent;
+
+use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
 use crate::math::quat;
 use crate::model::Model;
-use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
 use crate::solver::{ipm, newton};
 use crate::state::{SolveStatus, State, StepReport, Workspace};
 use crate::step::{AppliedForces, validate_inputs};
 use crate::{Error, Result, ensure};
+pub use partials::PartialsMethod;
+use partials::{Input, Partials};
 pub use rollout::{RolloutAdjoint, rollout_vjp};
 pub use tangent::Coordinates;
 use tangent::Point;
 
 /// Central-difference step for state, control and velocity inputs.
 const FD_STEP: f64 = 1e-6;
+
+/// Least iteration budget of the central-path solve at `kappa_grad` (see [`move_to_central`]).
+const CENTRAL_MAX_ITER: usize = 200;
 
 /// Which inputs to differentiate with respect to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,35 +110,38 @@ pub struct Adjoints {
     pub params: Vec<f64>,
 }
 
-/// One input direction of the step.
-#[derive(Clone, Copy, Debug)]
-enum Input {
-    State(usize),
-    Ctrl(usize),
-    Param(Param),
+/// Wall-clock seconds spent in each phase of a linearisation (for profiling; see
+/// `engine/examples/gradient_phases.rs`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PhaseTimes {
+    /// The hard solve of the step.
+    pub solve: f64,
+    /// The move to the central path at `kappa_grad`.
+    pub central: f64,
+    /// Assembly and factorisation of the Newton matrix at the gradient point.
+    pub factor: f64,
+    /// Partial derivatives `∂R/∂z`, `∂Y/∂z`, `∂Y/∂w`.
+    pub partials: f64,
+    /// Back-substitutions and products of [`Linearization::jacobians`] / `vjp` / `jvp`.
+    pub backsub: f64,
 }
 
 /// A solved step, linearised at its gradient point: the factored Newton matrix and the
 /// partial derivatives of the residual and the output map.
 pub struct Linearization {
     coords: Coordinates,
-    wrt: Wrt,
-    point: Point,
     next: State,
     report: StepReport,
     central: Option<StepReport>,
     ws: Workspace,
     /// Gradient point (the solution, or its central-path point at `kappa_grad`).
     w: Vec<f64>,
-    /// `∂R/∂z`, `nw × nz` with `z = [state | ctrl | params]` as selected by `wrt`.
-    r_z: DMatrix<f64>,
-    /// `∂Y/∂z`, `ny × nz`.
-    y_z: DMatrix<f64>,
-    /// `∂Y/∂w`, `ny × nw` (only body-velocity columns are non-zero).
-    y_w: DMatrix<f64>,
+    /// `∂R/∂z`, `∂Y/∂z`, `∂Y/∂w` with `z = [state | ctrl | params]` as selected by `wrt`.
+    parts: Partials,
     nx: usize,
     nu: usize,
     np: usize,
+    times: PhaseTimes,
 }
 
 fn not_converged(what: &str, report: StepReport) -> Error {
@@ -162,7 +180,9 @@ fn solve_for_gradient(
     state: &State,
     ctrl: &[f64],
     kappa: Option<f64>,
+    times: &mut PhaseTimes,
 ) -> Result<(State, StepReport, Option<StepReport>, Workspace)> {
+    let t0 = Instant::now();
     let mut ws = Workspace::new(model);
     validate_inputs(model, state, &ws, ctrl, &AppliedForces::default())?;
     newton::prepare(model, state, &mut ws, ctrl, &AppliedForces::default());
@@ -170,17 +190,10 @@ fn solve_for_gradient(
     ensure!(report.status.is_success(), not_converged("step", report));
     let mut next = state.clone();
     newton::write_state(model, &mut next, &ws);
-    let central = match kappa {
-        Some(k) if model.topology.has_cones => {
-            let c = ipm::solve_central(model, state, &mut ws, k);
-            ensure!(
-                c.status.is_success(),
-                not_converged(&format!("central-path point at kappa_grad = {k:e}"), c)
-            );
-            Some(c)
-        }
-        _ => None,
-    };
+    let t1 = Instant::now();
+    times.solve = (t1 - t0).as_secs_f64();
+    let central = move_to_central(model, state, &mut ws, kappa)?;
+    times.central = t1.elapsed().as_secs_f64();
     Ok((next, report, central, ws))
 }
 
@@ -192,7 +205,8 @@ pub fn step_smoothed(
     ctrl: &[f64],
     kappa: f64,
 ) -> Result<StepReport> {
-    let (_, _, central, ws) = solve_for_gradient(model, state, ctrl, Some(kappa))?;
+    let mut times = PhaseTimes::default();
+    let (_, _, central, ws) = solve_for_gradient(model, state, ctrl, Some(kappa), &mut times)?;
     let w = ws.w.clone();
     let prev = state.clone();
     next_state_into(model, &prev, &w, state);
@@ -204,55 +218,81 @@ pub fn step_smoothed(
     }))
 }
 
-/// Scratch for evaluating the residual and output map at perturbed inputs.
-struct Probe {
-    model: Model,
-    state: State,
+/// A solved step: the hard next state, the solver reports and the workspace holding the
+/// gradient point in `ws.w`.
+struct Solved {
     next: State,
-    ctrl: Vec<f64>,
+    report: StepReport,
+    central: Option<StepReport>,
     ws: Workspace,
-    residual: Vec<f64>,
-    y: Vec<f64>,
-    scratch: Vec<f64>,
 }
 
-impl Probe {
-    fn new(lin: &Linearization, model: &Model, ctrl: &[f64]) -> Probe {
-        let n = model.topology.pattern.total_dim();
-        // the residual map is linearised with the solve's contact activation frozen
-        let mut ws = Workspace::new(model);
-        ws.active.clone_from(&lin.ws.active);
-        Probe {
-            model: model.clone(),
-            state: lin.point.state.clone(),
-            next: lin.point.state.clone(),
-            ctrl: ctrl.to_vec(),
-            ws,
-            residual: vec![0.0; n],
-            y: vec![0.0; lin.coords.dim(model)],
-            scratch: vec![0.0; Point::scratch_len(model)],
+/// What a forward pass keeps of a solved step so that it can be linearised without solving it
+/// again: the solution and the contact activation it was solved with.
+#[derive(Clone, Debug)]
+pub(crate) struct StoredSolution {
+    w: Vec<f64>,
+    active: Vec<bool>,
+    report: StepReport,
+}
+
+impl StoredSolution {
+    /// The solution held by `ws` after a successful solve.
+    pub(crate) fn of(ws: &Workspace, report: StepReport) -> StoredSolution {
+        StoredSolution {
+            w: ws.w.clone(),
+            active: ws.active.clone(),
+            report,
         }
     }
+}
 
-    /// Residual and output at the gradient point with the probe's (perturbed) inputs.
-    fn eval(&mut self, w: &[f64], out_base: &Point) {
-        newton::prepare_forces(
-            &self.model,
-            &self.state,
-            &mut self.ws,
-            &self.ctrl,
-            &AppliedForces::default(),
+fn check_kappa(kappa_grad: Option<f64>) -> Result<()> {
+    if let Some(k) = kappa_grad {
+        ensure!(
+            k.is_finite() && k > 0.0,
+            Error::input("kappa_grad", k, "must be finite and > 0 (or None)")
         );
-        newton::evaluate_in(
-            &self.model,
-            &self.state,
-            &mut self.ws,
-            w,
-            &mut self.residual,
-            0.0,
-        );
-        next_state_into(&self.model, &self.state, w, &mut self.next);
-        out_base.difference(&self.model, &self.next, &mut self.y, &mut self.scratch);
+    }
+    Ok(())
+}
+
+/// Move a solved workspace onto the central path at `kappa` (when given and the model has
+/// inequality constraints).
+fn move_to_central(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    kappa: Option<f64>,
+) -> Result<Option<StepReport>> {
+    match kappa {
+        Some(k) if model.topology.has_cones => {
+            // NOTE: the central solve starts from the neutral point (γ = s = 1 on every
+            // candidate), far from the step's impulse scale; with hundreds of candidates it
+            // needs more iterations than a warm-started hard step (panda, 835 candidates:
+            // 36-56), so it gets its own budget
+            let mut opts = model.options.clone();
+            opts.max_iter = opts.max_iter.max(CENTRAL_MAX_ITER);
+            let central_model;
+            let m = if opts.max_iter == model.options.max_iter {
+                model
+            } else {
+                central_model = model.with_options(opts)?;
+                &central_model
+            };
+            let mut c = ipm::solve_central(m, state, ws, k);
+            // the solve checks convergence before each iteration: a last iterate that meets
+            // the tolerance is converged
+            if c.status == SolveStatus::MaxIterations && c.residual < model.options.rtol {
+                c.status = SolveStatus::Converged;
+            }
+            ensure!(
+                c.status.is_success(),
+                not_converged(&format!("central-path point at kappa_grad = {k:e}"), c)
+            );
+            Ok(Some(c))
+        }
+        _ => Ok(None),
     }
 }
 
@@ -266,20 +306,107 @@ impl Linearization {
         wrt: Wrt,
         kappa_grad: Option<f64>,
     ) -> Result<Linearization> {
-        if let Some(k) = kappa_grad {
-            ensure!(
-                k.is_finite() && k > 0.0,
-                Error::input("kappa_grad", k, "must be finite and > 0 (or None)")
-            );
-        }
+        Self::with_method(
+            model,
+            state,
+            ctrl,
+            coords,
+            wrt,
+            kappa_grad,
+            PartialsMethod::default(),
+        )
+    }
+
+    /// [`Linearization::new`] with the partial derivatives taken by `method`.
+    pub fn with_method(
+        model: &Model,
+        state: &State,
+        ctrl: &[f64],
+        coords: Coordinates,
+        wrt: Wrt,
+        kappa_grad: Option<f64>,
+        method: PartialsMethod,
+    ) -> Result<Linearization> {
+        check_kappa(kappa_grad)?;
         state.check_model(model)?;
         let point = Point::new(model, state, coords)?;
-        let (next, report, central, mut ws) =
-            solve_for_gradient(model, &point.state, ctrl, kappa_grad)?;
-        let kappa = if central.is_some() {
-            kappa_grad.unwrap_or(0.0)
-        } else {
-            0.0
+        let mut times = PhaseTimes::default();
+        let (next, report, central, ws) =
+            solve_for_gradient(model, &point.state, ctrl, kappa_grad, &mut times)?;
+        let solved = Solved {
+            next,
+            report,
+            central,
+            ws,
+        };
+        Self::at_solution(model, point, ctrl, wrt, kappa_grad, solved, times, method)
+    }
+
+    /// Linearise a step that a forward pass already solved from `state` (which must be the
+    /// state that solve started from, rebuilt in `coords`).
+    pub(crate) fn from_stored(
+        model: &Model,
+        state: &State,
+        ctrl: &[f64],
+        coords: Coordinates,
+        wrt: Wrt,
+        kappa_grad: Option<f64>,
+        stored: &StoredSolution,
+    ) -> Result<Linearization> {
+        check_kappa(kappa_grad)?;
+        let point = Point::new(model, state, coords)?;
+        let mut times = PhaseTimes::default();
+        let t0 = Instant::now();
+        let mut ws = Workspace::new(model);
+        validate_inputs(model, &point.state, &ws, ctrl, &AppliedForces::default())?;
+        newton::prepare(
+            model,
+            &point.state,
+            &mut ws,
+            ctrl,
+            &AppliedForces::default(),
+        );
+        ws.w.copy_from_slice(&stored.w);
+        ws.active.copy_from_slice(&stored.active);
+        newton::evaluate(model, &point.state, &mut ws, false, 0.0);
+        let mut next = point.state.clone();
+        newton::write_state(model, &mut next, &ws);
+        let t1 = Instant::now();
+        times.solve = (t1 - t0).as_secs_f64();
+        let central = move_to_central(model, &point.state, &mut ws, kappa_grad)?;
+        times.central = t1.elapsed().as_secs_f64();
+        let solved = Solved {
+            next,
+            report: stored.report,
+            central,
+            ws,
+        };
+        let method = PartialsMethod::default();
+        Self::at_solution(model, point, ctrl, wrt, kappa_grad, solved, times, method)
+    }
+
+    /// Factor the Newton matrix at the gradient point and take the partials.
+    #[allow(clippy::too_many_arguments)]
+    fn at_solution(
+        model: &Model,
+        point: Point,
+        ctrl: &[f64],
+        wrt: Wrt,
+        kappa_grad: Option<f64>,
+        solved: Solved,
+        mut times: PhaseTimes,
+        method: PartialsMethod,
+    ) -> Result<Linearization> {
+        let Solved {
+            next,
+            report,
+            central,
+            mut ws,
+        } = solved;
+        let t0 = Instant::now();
+        let kappa = match central {
+            Some(_) => kappa_grad.unwrap_or(0.0),
+            None => 0.0,
         };
         // Newton matrix at the gradient point, factored once for every input direction
         newton::evaluate(model, &point.state, &mut ws, false, kappa);
@@ -293,116 +420,43 @@ impl Linearization {
                 },
             ));
         }
-        let w = ws.w.clone();
+        times.factor = t0.elapsed().as_secs_f64();
+        let coords = point.coords;
+        let mut inputs = Vec::new();
+        if wrt.state {
+            inputs.extend((0..coords.dim(model)).map(Input::State));
+        }
+        if wrt.ctrl {
+            inputs.extend((0..model.nu()).map(Input::Ctrl));
+        }
+        if wrt.params {
+            inputs.extend(model.param_layout().into_iter().map(Input::Param));
+        }
         let nx = if wrt.state { coords.dim(model) } else { 0 };
         let nu = if wrt.ctrl { model.nu() } else { 0 };
-        let np = if wrt.params {
-            model.param_layout().len()
-        } else {
-            0
-        };
-        let (nw, ny) = (w.len(), coords.dim(model));
-        let mut lin = Linearization {
+        let np = inputs.len() - nx - nu;
+        let w = ws.w.clone();
+        let t0 = Instant::now();
+        let parts = partials::partials(model, &point, ctrl, &w, &ws.active, &inputs, method)?;
+        times.partials = t0.elapsed().as_secs_f64();
+        Ok(Linearization {
             coords,
-            wrt,
-            point,
             next,
             report,
             central,
             ws,
             w,
-            r_z: DMatrix::zeros(nw, nx + nu + np),
-            y_z: DMatrix::zeros(ny, nx + nu + np),
-            y_w: DMatrix::zeros(ny, nw),
+            parts,
             nx,
             nu,
             np,
-        };
-        lin.partials(model, ctrl);
-        Ok(lin)
+            times,
+        })
     }
 
-    /// Central differences of the residual and output map at the gradient point.
-    fn partials(&mut self, model: &Model, ctrl: &[f64]) {
-        let mut probe = Probe::new(self, model, ctrl);
-        // base of the output tangent: the smoothed next state
-        let mut base_next = self.point.state.clone();
-        next_state_into(model, &self.point.state, &self.w, &mut base_next);
-        let out_base = match Point::new(model, &base_next, Coordinates::Maximal) {
-            Ok(mut p) => {
-                p.coords = self.coords;
-                p.state = base_next;
-                p
-            }
-            Err(_) => return,
-        };
-        let mut inputs = Vec::new();
-        inputs.extend((0..self.nx).map(Input::State));
-        inputs.extend((0..self.nu).map(Input::Ctrl));
-        if self.wrt.params {
-            inputs.extend(model.param_layout().into_iter().map(Input::Param));
-        }
-        let ny = self.coords.dim(model);
-        let mut dir = vec![0.0; ny];
-        let (mut r_plus, mut y_plus) = (vec![0.0; self.w.len()], vec![0.0; ny]);
-        for (col, input) in inputs.into_iter().enumerate() {
-            let eps = match input {
-                Input::Param(p) => 1e-6 * model.param(p).abs().max(1.0),
-                _ => FD_STEP,
-            };
-            for sign in [1.0, -1.0] {
-                match input {
-                    Input::State(i) => {
-                        dir.fill(0.0);
-                        dir[i] = 1.0;
-                        self.point.perturbed(
-                            model,
-                            &dir,
-                            sign * eps,
-                            &mut probe.state,
-                            &mut probe.scratch,
-                        );
-                    }
-                    Input::Ctrl(i) => probe.ctrl[i] = ctrl[i] + sign * eps,
-                    Input::Param(p) => probe.model.set_param(p, model.param(p) + sign * eps),
-                }
-                probe.eval(&self.w, &out_base);
-                if sign > 0.0 {
-                    r_plus.copy_from_slice(&probe.residual);
-                    y_plus.copy_from_slice(&probe.y);
-                }
-            }
-            let inv = 1.0 / (2.0 * eps);
-            for (i, (p, m)) in r_plus.iter().zip(&probe.residual).enumerate() {
-                self.r_z[(i, col)] = (p - m) * inv;
-            }
-            for (i, (p, m)) in y_plus.iter().zip(&probe.y).enumerate() {
-                self.y_z[(i, col)] = (p - m) * inv;
-            }
-            // restore
-            match input {
-                Input::State(_) => probe.state.clone_from(&self.point.state),
-                Input::Ctrl(i) => probe.ctrl[i] = ctrl[i],
-                Input::Param(p) => probe.model.set_param(p, model.param(p)),
-            }
-        }
-        // ∂Y/∂w: only the body velocities enter the output map
-        let mut w = self.w.clone();
-        for b in 1..model.nbody() {
-            let o = body_node(b).map_or(0, |n| model.topology.pattern.offset(n));
-            for k in o..o + 6 {
-                let mut col = [vec![0.0; ny], vec![0.0; ny]];
-                for (s, sign) in [1.0, -1.0].into_iter().enumerate() {
-                    w[k] = self.w[k] + sign * FD_STEP;
-                    next_state_into(model, &self.point.state, &w, &mut probe.next);
-                    out_base.difference(model, &probe.next, &mut col[s], &mut probe.scratch);
-                }
-                w[k] = self.w[k];
-                for (i, (p, m)) in col[0].iter().zip(&col[1]).enumerate() {
-                    self.y_w[(i, k)] = (p - m) / (2.0 * FD_STEP);
-                }
-            }
-        }
+    /// Residual evaluations spent on the partial derivatives.
+    pub fn residual_evaluations(&self) -> usize {
+        self.parts.evaluations
     }
 
     /// The hard next state (what [`crate::step`] returns).
@@ -417,6 +471,10 @@ impl Linearization {
     /// inequality constraints).
     pub fn central_report(&self) -> Option<StepReport> {
         self.central
+    }
+    /// Seconds spent in each phase so far.
+    pub fn phase_times(&self) -> PhaseTimes {
+        self.times
     }
     /// Coordinates of the state tangent.
     pub fn coordinates(&self) -> Coordinates {
@@ -433,24 +491,42 @@ impl Linearization {
         Ok(())
     }
 
-    /// `R_w⁻¹ x` with the factorisation of the gradient point.
-    fn solve(&mut self, model: &Model, x: &mut [f64]) {
-        self.ws.matrix.solve(&model.topology.pattern, x);
-    }
-
     /// Full Jacobians (`A`, `B`, `C`; a block has no columns when its input was not selected).
+    /// `dx⁺/dz = ∂Y/∂z - Λᵀ ∂R/∂z` with `R_wᵀ Λ = ∂Y/∂wᵀ` (one transposed solve per output)
+    /// when there are fewer outputs than inputs, else `∂Y/∂w (R_w⁻¹ ∂R/∂z)` (one solve per input).
     pub fn jacobians(&mut self, model: &Model) -> Result<Jacobians> {
         self.check(model)?;
-        let nz = self.nx + self.nu + self.np;
-        let nw = self.w.len();
-        let mut x = DMatrix::zeros(nw, nz);
-        let mut col = vec![0.0; nw];
-        for j in 0..nz {
-            col.copy_from_slice(self.r_z.column(j).as_slice());
-            self.solve(model, &mut col);
-            x.column_mut(j).copy_from_slice(&col);
+        let t0 = Instant::now();
+        let p = &model.topology.pattern;
+        let parts = &self.parts;
+        let (ny, nz, nw) = (parts.y_z.nrows(), parts.y_z.ncols(), self.w.len());
+        let mut full = parts.y_z.clone();
+        let mut x = vec![0.0; nw];
+        if ny <= nz {
+            for i in 0..ny {
+                x.fill(0.0);
+                for &k in &parts.w_cols {
+                    x[k] = parts.y_w[(i, k)];
+                }
+                self.ws.matrix.solve_transpose(p, &mut x);
+                for c in 0..nz {
+                    full[(i, c)] -= parts.col_dot(c, &x);
+                }
+            }
+        } else {
+            for c in 0..nz {
+                x.copy_from_slice(parts.r_z.column(c).as_slice());
+                self.ws.matrix.solve(p, &mut x);
+                for i in 0..ny {
+                    full[(i, c)] -= parts
+                        .w_cols
+                        .iter()
+                        .map(|&k| parts.y_w[(i, k)] * x[k])
+                        .sum::<f64>();
+                }
+            }
         }
-        let full = &self.y_z - &self.y_w * x;
+        self.times.backsub += t0.elapsed().as_secs_f64();
         Ok(Jacobians {
             a: full.columns(0, self.nx).into_owned(),
             b: full.columns(self.nx, self.nu).into_owned(),
@@ -471,18 +547,27 @@ impl Linearization {
             adj_next.iter().all(|x| x.is_finite()),
             Error::input("adjoint_next", adj_next, "must be finite")
         );
-        let a = DVector::from_column_slice(adj_next);
-        let mut lam: Vec<f64> = (self.y_w.transpose() * &a).iter().copied().collect();
+        let t0 = Instant::now();
+        let parts = &self.parts;
+        // λ = R_w⁻ᵀ ∂Y/∂wᵀ a;  adj = ∂Y/∂zᵀ a - ∂R/∂zᵀ λ
+        let mut lam = vec![0.0; self.w.len()];
+        for &k in &parts.w_cols {
+            lam[k] = (0..ny).map(|i| parts.y_w[(i, k)] * adj_next[i]).sum();
+        }
         self.ws
             .matrix
             .solve_transpose(&model.topology.pattern, &mut lam);
-        let lam = DVector::from_vec(lam);
-        let adj = self.y_z.transpose() * &a - self.r_z.transpose() * lam;
-        let s = adj.as_slice();
+        let adj: Vec<f64> = (0..parts.y_z.ncols())
+            .map(|c| {
+                let y: f64 = (0..ny).map(|i| parts.y_z[(i, c)] * adj_next[i]).sum();
+                y - parts.col_dot(c, &lam)
+            })
+            .collect();
+        self.times.backsub += t0.elapsed().as_secs_f64();
         Ok(Adjoints {
-            state: s[..self.nx].to_vec(),
-            ctrl: s[self.nx..self.nx + self.nu].to_vec(),
-            params: s[self.nx + self.nu..].to_vec(),
+            state: adj[..self.nx].to_vec(),
+            ctrl: adj[self.nx..self.nx + self.nu].to_vec(),
+            params: adj[self.nx + self.nu..].to_vec(),
         })
     }
 
@@ -512,9 +597,25 @@ impl Linearization {
             self.nx + self.nu + self.np,
             dx.iter().chain(du).chain(dtheta).copied(),
         );
-        let mut dw: Vec<f64> = (&self.r_z * &t).iter().copied().collect();
-        self.solve(model, &mut dw);
-        let out = &self.y_z * &t - &self.y_w * DVector::from_vec(dw);
+        let parts = &self.parts;
+        let mut dw = vec![0.0; self.w.len()];
+        for (c, tc) in t.iter().enumerate() {
+            for &(s, l) in &parts.rows[c] {
+                for (d, r) in dw[s..s + l]
+                    .iter_mut()
+                    .zip(&parts.r_z.column(c).as_slice()[s..s + l])
+                {
+                    *d += r * tc;
+                }
+            }
+        }
+        self.ws.matrix.solve(&model.topology.pattern, &mut dw);
+        let mut out = &parts.y_z * &t;
+        for &k in &parts.w_cols {
+            for i in 0..out.len() {
+                out[i] -= parts.y_w[(i, k)] * dw[k];
+            }
+        }
         Ok(out.iter().copied().collect())
     }
 }

@@ -1,7 +1,7 @@
 //! Reverse-mode sweep over a whole trajectory: the gradient of a loss on every state with
 //! respect to the initial state, every control and the parameters.
 use super::tangent::{Coordinates, Point};
-use super::{Linearization, Wrt, not_converged};
+use super::{Linearization, StoredSolution, Wrt, not_converged};
 use crate::model::Model;
 use crate::solver::newton;
 use crate::state::{State, Workspace};
@@ -28,6 +28,18 @@ pub(crate) fn advance(
     coords: Coordinates,
     ws: &mut Workspace,
 ) -> Result<State> {
+    advance_stored(model, state, ctrl, coords, ws).map(|(s, _)| s)
+}
+
+/// [`advance`], also returning what the reverse sweep needs to linearise the step without
+/// solving it again (the solution is left in `ws`).
+fn advance_stored(
+    model: &Model,
+    state: &State,
+    ctrl: &[f64],
+    coords: Coordinates,
+    ws: &mut Workspace,
+) -> Result<(State, StoredSolution)> {
     let mut s = Point::new(model, state, coords)?.state;
     crate::step::validate_inputs(model, &s, ws, ctrl, &AppliedForces::default())?;
     newton::prepare(model, &s, ws, ctrl, &AppliedForces::default());
@@ -37,14 +49,15 @@ pub(crate) fn advance(
         not_converged("rollout step", report)
     );
     newton::write_state(model, &mut s, ws);
-    Ok(s)
+    Ok((s, StoredSolution::of(ws, report)))
 }
 
 /// Gradient of `L(x_0, …, x_T)` through the rollout from `state` with `ctrls` (row-major
 /// `(nstep, nu)`), given `adjoint_states` = `∂L/∂x_k` for k = 0..=T (row-major `(T+1, ny)`,
-/// tangent coordinates). The forward pass stores the states; the reverse pass re-linearises
-/// each step from its stored state (warm-started, so the re-solve is short) and applies one
-/// transposed back-substitution per step.
+/// tangent coordinates). The forward pass stores the states and each step's solution; the
+/// reverse pass linearises each step at its stored solution (no second solve; with
+/// `kappa_grad`, after the move to the central path) and applies one transposed
+/// back-substitution per step.
 #[allow(clippy::too_many_arguments)]
 pub fn rollout_vjp(
     model: &Model,
@@ -102,9 +115,10 @@ pub(crate) fn rollout_vjp_with(
     state.check_model(model)?;
     let mut ws = Workspace::new(model);
     let mut states = Vec::with_capacity(nstep + 1);
+    let mut solutions = Vec::with_capacity(nstep);
     states.push(Point::new(model, state, coords)?.state);
     for k in 0..nstep {
-        let next = advance(
+        let (next, solution) = advance_stored(
             model,
             &states[k],
             &ctrls[k * nu..(k + 1) * nu],
@@ -113,6 +127,7 @@ pub(crate) fn rollout_vjp_with(
         )
         .map_err(|e| e.at(format!(" (step {k})")))?;
         states.push(next);
+        solutions.push(solution);
     }
     let wrt = Wrt {
         state: true,
@@ -140,8 +155,10 @@ pub(crate) fn rollout_vjp_with(
     };
     for k in (0..nstep).rev() {
         let u = &ctrls[k * nu..(k + 1) * nu];
-        let mut lin = Linearization::new(model, &states[k], u, coords, wrt, kappa_grad)
-            .map_err(|e| e.at(format!(" (step {k})")))?;
+        let stored = &solutions[k];
+        let mut lin =
+            Linearization::from_stored(model, &states[k], u, coords, wrt, kappa_grad, stored)
+                .map_err(|e| e.at(format!(" (step {k})")))?;
         let a = lin.vjp(model, &adj)?;
         out.ctrls[k * nu..(k + 1) * nu].copy_from_slice(&a.ctrl);
         for (p, g) in out.params.iter_mut().zip(&a.params) {

@@ -64,8 +64,12 @@ pub fn integrate_qpos(model: &Model, qpos: &mut [f64], dq: &[f64]) {
                 dq[va + j.ntrans + 1],
                 dq[va + j.ntrans + 2],
             );
-            let q = (quat::from_wxyz(&qpos[a..a + 4]) * exp_rot(&d)).normalize();
-            qpos[a..a + 4].copy_from_slice(quat::wxyz(&q).as_slice());
+            // an unperturbed quaternion stays bitwise as it is (the partials' row supports
+            // are found by comparing perturbed states with the base state)
+            if d != Vector3::zeros() {
+                let q = (quat::from_wxyz(&qpos[a..a + 4]) * exp_rot(&d)).normalize();
+                qpos[a..a + 4].copy_from_slice(quat::wxyz(&q).as_slice());
+            }
         } else {
             for i in 0..j.nfree() {
                 qpos[qa + i] += dq[va + i];
@@ -155,6 +159,9 @@ impl Point {
             Coordinates::Maximal => {
                 for b in 1..model.nbody() {
                     let d = &dir[12 * (b - 1)..12 * b];
+                    if eps == 0.0 || d.iter().all(|&x| x == 0.0) {
+                        continue; // unperturbed bodies stay bitwise as they are
+                    }
                     let mut pose = self.state.pose(b);
                     let (v, w) = self.state.velocity(b);
                     let dv = |k: usize| Vector3::new(d[k], d[k + 1], d[k + 2]) * eps;

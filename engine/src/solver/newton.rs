@@ -59,6 +59,21 @@ pub(crate) fn prepare_forces(
     ctrl: &[f64],
     forces: &AppliedForces,
 ) {
+    prepare_smooth_forces(model, state, ws, ctrl, forces);
+    if model.topology.has_cones {
+        super::inequality::prepare(model, state, ws);
+    }
+}
+
+/// [`prepare_forces`] without the contact frames (the gradients refresh only the candidates a
+/// perturbation moves).
+pub(crate) fn prepare_smooth_forces(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+) {
     let h = model.options.timestep;
     let g = model.options.gravity;
     for (b, body) in model.bodies.iter().enumerate() {
@@ -103,9 +118,6 @@ pub(crate) fn prepare_forces(
     }
     super::actuation::add_site_wrenches(model, state, ws);
     super::coupling::prepare(model, state, ws);
-    if model.topology.has_cones {
-        super::inequality::prepare(model, state, ws);
-    }
 }
 
 /// Evaluate applied impulses and current-configuration Jacobians; set the initial iterate.

@@ -1,0 +1,467 @@
+//! Partial derivatives of the residual and the output map at the gradient point `w`:
+//! `∂R/∂z`, `∂Y/∂z` and `∂Y/∂w`, by central differences of the engine's own functions
+//! (step 1e-6 in state units; relative error ~1e-9).
+//!
+//! **Coloured** (default): columns of `∂R/∂z` with disjoint row supports ([`super::sparsity`])
+//! are perturbed together in one residual evaluation, and each evaluation refreshes only the
+//! contact candidates the perturbation moves; the rest of the residual is recomputed from the
+//! same inputs, so it cancels in the difference. Inputs that move nothing (velocities,
+//! controls, masses, …) evaluate no contact geometry at all. `∂Y/∂z` is taken per column
+//! from the output map alone (no residual), `∂Y/∂w` per body velocity.
+//! **Column by column**: one full residual evaluation per column and sign, the reference the
+//! tests compare the coloured partials against.
+use nalgebra::DMatrix;
+
+use super::sparsity::{Interactions, Support, colour, transmission_bodies};
+use super::tangent::{Coordinates, Point};
+use super::{FD_STEP, next_state_into};
+use crate::contact::{ContactFrame, witness};
+use crate::joints::geometry::Pose;
+use crate::model::Model;
+use crate::model::params::Param;
+use crate::model::topology_body_node as body_node;
+use crate::solver::newton;
+use crate::state::{State, Workspace};
+use crate::step::AppliedForces;
+
+/// How [`super::Linearization`] takes the partial derivatives.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PartialsMethod {
+    /// Columns with disjoint row supports perturbed together; only moved contact candidates
+    /// re-evaluated.
+    #[default]
+    Coloured,
+    /// One full residual evaluation per column and sign (the reference).
+    ColumnByColumn,
+}
+
+/// One input direction of the step.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Input {
+    State(usize),
+    Ctrl(usize),
+    Param(Param),
+}
+
+/// The partial derivatives and where `∂R/∂z` can be non-zero.
+pub(super) struct Partials {
+    /// `∂R/∂z`, `nw × nz`.
+    pub r_z: DMatrix<f64>,
+    /// `∂Y/∂z`, `ny × nz`.
+    pub y_z: DMatrix<f64>,
+    /// `∂Y/∂w`, `ny × nw` (only body-velocity columns are non-zero, see `w_cols`).
+    pub y_w: DMatrix<f64>,
+    /// Row ranges `(start, len)` of `w` where each column of `r_z` can be non-zero.
+    pub rows: Vec<Vec<(usize, usize)>>,
+    /// Columns of `w` that `Y` depends on (the body velocities).
+    pub w_cols: Vec<usize>,
+    /// Residual evaluations spent.
+    pub evaluations: usize,
+}
+
+impl Partials {
+    /// `∂R/∂z[:, c] · v` over the column's support.
+    pub fn col_dot(&self, c: usize, v: &[f64]) -> f64 {
+        let col = self.r_z.column(c);
+        let col = col.as_slice();
+        self.rows[c]
+            .iter()
+            .map(|&(s, l)| {
+                col[s..s + l]
+                    .iter()
+                    .zip(&v[s..s + l])
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+}
+
+/// Scratch for evaluating the residual and output map at perturbed inputs.
+struct Probe<'a> {
+    base: &'a Model,
+    point: &'a Point,
+    ctrl0: &'a [f64],
+    model: Model,
+    state: State,
+    next: State,
+    ctrl: Vec<f64>,
+    ws: Workspace,
+    residual: Vec<f64>,
+    scratch: Vec<f64>,
+    dir: Vec<f64>,
+}
+
+impl<'a> Probe<'a> {
+    fn new(model: &'a Model, point: &'a Point, ctrl: &'a [f64], active: &[bool]) -> Probe<'a> {
+        let mut ws = Workspace::new(model);
+        // the residual map is linearised with the solve's contact activation frozen
+        ws.active.copy_from_slice(active);
+        Probe {
+            base: model,
+            point,
+            ctrl0: ctrl,
+            model: model.clone(),
+            state: point.state.clone(),
+            next: point.state.clone(),
+            ctrl: ctrl.to_vec(),
+            ws,
+            residual: vec![0.0; model.topology.pattern.total_dim()],
+            scratch: vec![0.0; Point::scratch_len(model)],
+            dir: vec![0.0; point.coords.dim(model)],
+        }
+    }
+
+    /// Perturb the inputs `cols` by `sign · eps[c]` (state directions together).
+    fn perturb(&mut self, inputs: &[Input], eps: &[f64], cols: &[usize], sign: f64) {
+        self.dir.fill(0.0);
+        let mut state = false;
+        for &c in cols {
+            match inputs[c] {
+                Input::State(i) => {
+                    self.dir[i] = 1.0;
+                    state = true;
+                }
+                Input::Ctrl(i) => self.ctrl[i] = self.ctrl0[i] + sign * eps[c],
+                Input::Param(p) => self.model.set_param(p, self.base.param(p) + sign * eps[c]),
+            }
+        }
+        if state {
+            let (model, dir) = (self.base, &self.dir);
+            self.point.perturbed(
+                model,
+                dir,
+                sign * FD_STEP,
+                &mut self.state,
+                &mut self.scratch,
+            );
+        }
+    }
+
+    fn restore(&mut self, inputs: &[Input], cols: &[usize]) {
+        for &c in cols {
+            match inputs[c] {
+                Input::State(_) => self.state.clone_from(&self.point.state),
+                Input::Ctrl(i) => self.ctrl[i] = self.ctrl0[i],
+                Input::Param(p) => self.model.set_param(p, self.base.param(p)),
+            }
+        }
+    }
+
+    /// Full residual at `w` with the probe's inputs.
+    fn residual_full(&mut self, w: &[f64]) {
+        let forces = AppliedForces::default();
+        newton::prepare_forces(&self.model, &self.state, &mut self.ws, &self.ctrl, &forces);
+        newton::evaluate_in(
+            &self.model,
+            &self.state,
+            &mut self.ws,
+            w,
+            &mut self.residual,
+            0.0,
+        );
+    }
+
+    /// Residual at `w` with only the contact candidates `contacts` (of those `active`)
+    /// evaluated; the others are left out of both rows and impulses (they do not change).
+    fn residual_restricted(&mut self, w: &[f64], contacts: &[usize], active: &[bool]) {
+        let (model, state) = (&self.model, &self.state);
+        let forces = AppliedForces::default();
+        newton::prepare_smooth_forces(model, state, &mut self.ws, &self.ctrl, &forces);
+        self.ws.active.fill(false);
+        let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
+        // the contact frames of `inequality::prepare`, for the candidates that move
+        for &c in contacts.iter().filter(|&&c| active[c]) {
+            let (wit, pa, pb) = witness(&model.contacts[c], &model.geoms, pose);
+            self.ws.contact_now[c] = ContactFrame::new(&wit, &pa, &pb);
+            self.ws.active[c] = true;
+        }
+        newton::evaluate_in(model, state, &mut self.ws, w, &mut self.residual, 0.0);
+    }
+
+    /// Output tangent (relative to `out_base`) of the next state from `w` with the probe's inputs.
+    fn output(&mut self, w: &[f64], out_base: &Point, y: &mut [f64]) {
+        next_state_into(&self.model, &self.state, w, &mut self.next);
+        out_base.difference(&self.model, &self.next, y, &mut self.scratch);
+    }
+}
+
+/// Bodies whose pose (`moved`) or pose or velocity (`touched`) differ between two states.
+fn changed_bodies(model: &Model, a: &State, b: &State) -> (Vec<usize>, Vec<usize>) {
+    let (mut touched, mut moved) = (Vec::new(), Vec::new());
+    for k in 1..model.nbody() {
+        let (pa, pb) = (a.pose(k), b.pose(k));
+        let pose = pa.pos != pb.pos || pa.quat != pb.quat;
+        if pose {
+            moved.push(k);
+        }
+        if pose || a.velocity(k) != b.velocity(k) {
+            touched.push(k);
+        }
+    }
+    (touched, moved)
+}
+
+/// Central-difference step of each input.
+fn steps(model: &Model, inputs: &[Input]) -> Vec<f64> {
+    inputs
+        .iter()
+        .map(|i| match i {
+            Input::Param(p) => 1e-6 * model.param(*p).abs().max(1.0),
+            _ => FD_STEP,
+        })
+        .collect()
+}
+
+/// Row supports of every input column.
+fn supports(model: &Model, probe: &mut Probe, inputs: &[Input], eps: &[f64]) -> Vec<Support> {
+    let graph = Interactions::new(model);
+    let all: Vec<usize> = (1..model.nbody()).collect();
+    inputs
+        .iter()
+        .enumerate()
+        .map(|(c, input)| match *input {
+            Input::State(_) => {
+                probe.perturb(inputs, eps, &[c], 1.0);
+                let (touched, moved) = changed_bodies(model, &probe.point.state, &probe.state);
+                probe.restore(inputs, &[c]);
+                Support::new(model, &graph, &touched, &moved, &[])
+            }
+            Input::Ctrl(i) => {
+                let bodies = transmission_bodies(model, &model.actuators[i].transmission);
+                Support::new(model, &graph, &bodies, &[], &[])
+            }
+            Input::Param(p) => match p {
+                Param::Mass(b) | Param::Inertia(b, _, _) => {
+                    Support::new(model, &graph, &[b], &[], &[])
+                }
+                Param::Friction(g) | Param::Size(g, _) | Param::GeomPos(g, _) => {
+                    Support::new(model, &graph, &[], &[], &graph.geom_contacts[g])
+                }
+                Param::Stiffness(j, _) | Param::Damping(j, _) => {
+                    let joint = &model.joints[j];
+                    Support::new(model, &graph, &[joint.parent, joint.child], &[], &[])
+                }
+                Param::Gravity(_) => Support::new(model, &graph, &all, &[], &[]),
+                Param::Timestep => Support::everything(model),
+            },
+        })
+        .collect()
+}
+
+/// Row ranges of a sorted node list, adjacent ranges merged.
+fn node_rows(model: &Model, nodes: &[usize]) -> Vec<(usize, usize)> {
+    let p = &model.topology.pattern;
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    let mut sorted: Vec<(usize, usize)> = nodes.iter().map(|&n| (p.offset(n), p.dim(n))).collect();
+    sorted.sort_unstable();
+    for (o, d) in sorted {
+        match out.last_mut() {
+            Some((s, l)) if *s + *l == o => *l += d,
+            _ => out.push((o, d)),
+        }
+    }
+    out
+}
+
+/// Compute the partials at `w` (the gradient point of `point` with controls `ctrl`; contact
+/// activation `active`); the output tangent is taken relative to the next state at `w`.
+pub(super) fn partials(
+    model: &Model,
+    point: &Point,
+    ctrl: &[f64],
+    w: &[f64],
+    active: &[bool],
+    inputs: &[Input],
+    method: PartialsMethod,
+) -> crate::Result<Partials> {
+    let (nw, ny, nz) = (w.len(), point.coords.dim(model), inputs.len());
+    let eps = steps(model, inputs);
+    let mut probe = Probe::new(model, point, ctrl, active);
+    let mut out = Partials {
+        r_z: DMatrix::zeros(nw, nz),
+        y_z: DMatrix::zeros(ny, nz),
+        y_w: DMatrix::zeros(ny, nw),
+        rows: vec![vec![(0, nw)]; nz],
+        w_cols: (1..model.nbody())
+            .flat_map(|b| {
+                let o = body_node(b).map_or(0, |n| model.topology.pattern.offset(n));
+                o..o + 6
+            })
+            .collect(),
+        evaluations: 0,
+    };
+    // base of the output tangent: the next state at the gradient point
+    let mut base_next = point.state.clone();
+    next_state_into(model, &point.state, w, &mut base_next);
+    let mut out_base = Point::new(model, &base_next, Coordinates::Maximal)?;
+    out_base.coords = point.coords;
+    out_base.state = base_next;
+    let groups: Vec<Vec<usize>> = match method {
+        PartialsMethod::ColumnByColumn => (0..nz).map(|c| vec![c]).collect(),
+        PartialsMethod::Coloured => {
+            let sup = supports(model, &mut probe, inputs, &eps);
+            for (c, s) in sup.iter().enumerate() {
+                out.rows[c] = node_rows(model, &s.nodes);
+            }
+            let groups = colour(&sup, model.topology.pattern.nnodes());
+            // contacts each group must refresh
+            let contacts: Vec<Vec<usize>> = groups
+                .iter()
+                .map(|g| {
+                    let mut cs: Vec<usize> =
+                        g.iter().flat_map(|&c| sup[c].contacts.clone()).collect();
+                    cs.sort_unstable();
+                    cs.dedup();
+                    cs
+                })
+                .collect();
+            residual_columns(
+                &mut probe,
+                &mut out,
+                inputs,
+                &eps,
+                w,
+                &groups,
+                Some(&contacts),
+            );
+            output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, method);
+            return Ok(out);
+        }
+    };
+    residual_columns(&mut probe, &mut out, inputs, &eps, w, &groups, None);
+    output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, method);
+    Ok(out)
+}
+
+/// `∂R/∂z` by central differences, one residual evaluation per group and sign; with
+/// `contacts`, each group evaluates only its contact candidates and scatters by the supports.
+fn residual_columns(
+    probe: &mut Probe,
+    out: &mut Partials,
+    inputs: &[Input],
+    eps: &[f64],
+    w: &[f64],
+    groups: &[Vec<usize>],
+    contacts: Option<&[Vec<usize>]>,
+) {
+    let active = probe.ws.active.clone();
+    let mut plus = vec![0.0; w.len()];
+    for (k, group) in groups.iter().enumerate() {
+        for sign in [1.0, -1.0] {
+            probe.perturb(inputs, eps, group, sign);
+            match contacts {
+                Some(cs) => probe.residual_restricted(w, &cs[k], &active),
+                None => probe.residual_full(w),
+            }
+            out.evaluations += 1;
+            probe.restore(inputs, group);
+            if sign > 0.0 {
+                plus.copy_from_slice(&probe.residual);
+            }
+        }
+        for &c in group {
+            let inv = 1.0 / (2.0 * eps[c]);
+            for &(s, l) in &out.rows[c] {
+                let (p, m) = (&plus[s..s + l], &probe.residual[s..s + l]);
+                for (i, (p, m)) in p.iter().zip(m).enumerate() {
+                    out.r_z[(s + i, c)] = (p - m) * inv;
+                }
+            }
+        }
+    }
+    probe.ws.active.copy_from_slice(&active);
+}
+
+/// `∂Y/∂z` per column (the output map alone: only state columns and the time step enter it)
+/// and `∂Y/∂w` per body velocity component.
+fn output_partials(
+    probe: &mut Probe,
+    out: &mut Partials,
+    inputs: &[Input],
+    eps: &[f64],
+    w: &[f64],
+    out_base: &Point,
+    method: PartialsMethod,
+) {
+    let ny = out.y_z.nrows();
+    let (mut yp, mut ym) = (vec![0.0; ny], vec![0.0; ny]);
+    for (c, input) in inputs.iter().enumerate() {
+        if !matches!(input, Input::State(_) | Input::Param(Param::Timestep)) {
+            continue;
+        }
+        for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
+            probe.perturb(inputs, eps, &[c], sign);
+            probe.output(w, out_base, y);
+            probe.restore(inputs, &[c]);
+        }
+        for i in 0..ny {
+            out.y_z[(i, c)] = (yp[i] - ym[i]) / (2.0 * eps[c]);
+        }
+    }
+    // ∂Y/∂w: bodies whose outputs do not overlap are perturbed together
+    let model = probe.base;
+    let (rows, groups) = match method {
+        PartialsMethod::Coloured => {
+            let rows = output_rows(model, out_base.coords);
+            let groups = colour(&rows, ny);
+            (rows, groups)
+        }
+        PartialsMethod::ColumnByColumn => {
+            let all = Support {
+                nodes: (0..ny).collect(),
+                contacts: vec![],
+            };
+            let n = model.nbody() - 1;
+            (vec![all; n], (0..n).map(|b| vec![b]).collect())
+        }
+    };
+    let slot = |b: usize| body_node(b + 1).map_or(0, |n| model.topology.pattern.offset(n));
+    let mut wp = w.to_vec();
+    for group in &groups {
+        for comp in 0..6 {
+            for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
+                for &b in group {
+                    wp[slot(b) + comp] = w[slot(b) + comp] + sign * FD_STEP;
+                }
+                probe.output(&wp, out_base, y);
+            }
+            for &b in group {
+                let k = slot(b) + comp;
+                wp[k] = w[k];
+                for &i in &rows[b].nodes {
+                    out.y_w[(i, k)] = (yp[i] - ym[i]) / (2.0 * FD_STEP);
+                }
+            }
+        }
+    }
+}
+
+/// Output rows (as a [`Support`]'s `nodes`) that each moving body's next velocities reach:
+/// its own 12 in maximal coordinates; in minimal ones the dofs of the joints it is the parent
+/// or child of (a joint's coordinates and rates are those of its child relative to its parent).
+fn output_rows(model: &Model, coords: Coordinates) -> Vec<Support> {
+    let nv = model.nv;
+    (1..model.nbody())
+        .map(|b| {
+            let nodes = match coords {
+                Coordinates::Maximal => (12 * (b - 1)..12 * b).collect(),
+                Coordinates::Minimal => {
+                    let mut rows: Vec<usize> = model
+                        .joints
+                        .iter()
+                        .filter(|j| !j.is_loop && (j.parent == b || j.child == b))
+                        .flat_map(|j| j.qvel_adr..j.qvel_adr + j.nfree())
+                        .flat_map(|i| [i, nv + i])
+                        .collect();
+                    rows.sort_unstable();
+                    rows
+                }
+            };
+            Support {
+                nodes,
+                contacts: vec![],
+            }
+        })
+        .collect()
+}

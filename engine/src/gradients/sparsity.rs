@@ -1,0 +1,211 @@
+//! Row supports of the residual partials `∂R/∂z` and their column colouring
+//! (Curtis–Powell–Reid).
+//!
+//! A perturbed input changes the residual only near the bodies it touches: their body rows and
+//! those of their neighbours in the *interaction graph* (bodies sharing a joint, a joint
+//! coupling or an actuator transmission), the joint, limit and coupling nodes of their joints,
+//! and the nodes of the contact candidates whose geometry it moves together with the rows of
+//! those candidates' two bodies.
+//! Columns whose supports are disjoint can be perturbed in one residual evaluation and
+//! separated afterwards by their supports; the graph is fixed by the model's topology.
+use crate::model::Model;
+use crate::model::Transmission;
+use crate::model::topology_body_node as body_node;
+
+/// Which bodies interact with which, and which contact candidates each body and geom has.
+pub(super) struct Interactions {
+    /// Neighbours of each body through joints, couplings and transmissions (itself included),
+    /// sorted.
+    nbrs: Vec<Vec<usize>>,
+    /// Contact candidates of each body.
+    body_contacts: Vec<Vec<usize>>,
+    /// Contact candidates of each geom.
+    pub geom_contacts: Vec<Vec<usize>>,
+}
+
+impl Interactions {
+    pub fn new(model: &Model) -> Interactions {
+        let nb = model.nbody();
+        let mut nbrs: Vec<Vec<usize>> = (0..nb).map(|b| vec![b]).collect();
+        let mut link = |group: &[usize]| {
+            for &a in group.iter().filter(|&&a| a > 0) {
+                nbrs[a].extend(group.iter().filter(|&&b| b > 0));
+            }
+        };
+        for j in &model.joints {
+            link(&[j.parent, j.child]);
+        }
+        for c in &model.topology.coupling_blocks {
+            link(&c.iter().map(|&(b, _)| b).collect::<Vec<_>>());
+        }
+        for a in &model.actuators {
+            link(&transmission_bodies(model, &a.transmission));
+        }
+        let mut body_contacts = vec![Vec::new(); nb];
+        let mut geom_contacts = vec![Vec::new(); model.geoms.len()];
+        for (c, contact) in model.contacts.iter().enumerate() {
+            // NOTE: no link: a contact changes only when its geometry moves, and then its own
+            // rows and the rows of its two bodies are in the support (see `Support::new`)
+            let [a, b] = model.topology.contact_bodies[c];
+            body_contacts[a].push(c);
+            if b != a {
+                body_contacts[b].push(c);
+            }
+            geom_contacts[contact.geom_a].push(c);
+            geom_contacts[contact.geom_b].push(c);
+        }
+        for n in &mut nbrs {
+            n.sort_unstable();
+            n.dedup();
+        }
+        Interactions {
+            nbrs,
+            body_contacts,
+            geom_contacts,
+        }
+    }
+}
+
+/// Bodies an actuator's force acts on (and whose state its length and rate depend on).
+pub(super) fn transmission_bodies(model: &Model, t: &Transmission) -> Vec<usize> {
+    match t {
+        Transmission::Joint { joint, .. } => {
+            vec![model.joints[*joint].parent, model.joints[*joint].child]
+        }
+        Transmission::Tendon(terms) => terms
+            .iter()
+            .flat_map(|&(j, _, _)| [model.joints[j].parent, model.joints[j].child])
+            .collect(),
+        Transmission::Site { body, .. } => vec![*body],
+    }
+}
+
+/// Where one column of `∂R/∂z` can be non-zero, and what its evaluation must refresh.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Support {
+    /// Graph nodes whose rows may change, sorted.
+    pub nodes: Vec<usize>,
+    /// Contact candidates whose geometry changes (re-evaluated), sorted.
+    pub contacts: Vec<usize>,
+}
+
+impl Support {
+    /// The support of an input that changes the state or the elements of the moving bodies
+    /// `touched`, moves the bodies `moved` (a subset) and changes the contact candidates
+    /// `contacts` beyond those of the moved bodies.
+    pub fn new(
+        model: &Model,
+        graph: &Interactions,
+        touched: &[usize],
+        moved: &[usize],
+        contacts: &[usize],
+    ) -> Support {
+        let t = &model.topology;
+        let mut cs: Vec<usize> = contacts.to_vec();
+        for &b in moved {
+            cs.extend(&graph.body_contacts[b]);
+        }
+        cs.sort_unstable();
+        cs.dedup();
+        let mut is_touched = vec![false; model.nbody()];
+        for &b in touched.iter().filter(|&&b| b > 0) {
+            is_touched[b] = true;
+        }
+        // a contact's impulse acts on its two bodies only
+        let mut nodes: Vec<usize> = cs
+            .iter()
+            .flat_map(|&c| t.contact_bodies[c])
+            .filter_map(body_node)
+            .collect();
+        for &b in touched.iter().filter(|&&b| b > 0) {
+            nodes.extend(graph.nbrs[b].iter().filter_map(|&n| body_node(n)));
+        }
+        for (j, joint) in model.joints.iter().enumerate() {
+            if is_touched[joint.parent] || is_touched[joint.child] {
+                nodes.extend(t.joint_node[j]);
+                nodes.extend(t.limit_node[j]);
+            }
+        }
+        for (k, blocks) in t.coupling_blocks.iter().enumerate() {
+            if blocks.iter().any(|&(b, _)| is_touched[b]) {
+                nodes.push(t.coupling_node[k]);
+            }
+        }
+        nodes.extend(cs.iter().map(|&c| t.contact_node[c]));
+        nodes.sort_unstable();
+        nodes.dedup();
+        Support {
+            nodes,
+            contacts: cs,
+        }
+    }
+
+    /// Every row and every contact candidate (inputs that change the whole step).
+    pub fn everything(model: &Model) -> Support {
+        Support {
+            nodes: (0..model.topology.pattern.nnodes()).collect(),
+            contacts: (0..model.ncontact()).collect(),
+        }
+    }
+}
+
+/// Greedy colouring: groups of columns with pairwise disjoint supports, columns with the
+/// largest supports placed first.
+pub(super) fn colour(supports: &[Support], nnodes: usize) -> Vec<Vec<usize>> {
+    let mut order: Vec<usize> = (0..supports.len()).collect();
+    order.sort_by_key(|&c| std::cmp::Reverse(supports[c].nodes.len()));
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    let mut used: Vec<Vec<bool>> = Vec::new();
+    for c in order {
+        let nodes = &supports[c].nodes;
+        let k = match used.iter().position(|u| nodes.iter().all(|&n| !u[n])) {
+            Some(k) => k,
+            None => {
+                groups.push(Vec::new());
+                used.push(vec![false; nnodes]);
+                groups.len() - 1
+            }
+        };
+        groups[k].push(c);
+        for &n in nodes {
+            used[k][n] = true;
+        }
+    }
+    groups
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colour_groups_are_disjoint_and_cover_every_column() {
+        // a chain of supports {i, i+1} over 10 nodes, plus one column touching everything
+        let mut sup: Vec<Support> = (0..9)
+            .map(|i| Support {
+                nodes: vec![i, i + 1],
+                contacts: vec![],
+            })
+            .collect();
+        sup.push(Support {
+            nodes: (0..10).collect(),
+            contacts: vec![],
+        });
+        let groups = colour(&sup, 10);
+        let mut seen = vec![false; sup.len()];
+        for g in &groups {
+            let mut used = [false; 10];
+            for &c in g {
+                assert!(!seen[c], "column {c} coloured twice");
+                seen[c] = true;
+                for &n in &sup[c].nodes {
+                    assert!(!used[n], "group {g:?} shares node {n}");
+                    used[n] = true;
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s));
+        // the full column alone, the chain in two alternating groups
+        assert_eq!(groups.len(), 3);
+    }
+}
