@@ -15,8 +15,6 @@ use nalgebra::DMatrix;
 use super::sparsity::{Interactions, Support, colour, transmission_bodies};
 use super::tangent::{Coordinates, Point};
 use super::{FD_STEP, next_state_into};
-use crate::contact::{ContactFrame, witness};
-use crate::joints::geometry::Pose;
 use crate::model::Model;
 use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
@@ -169,11 +167,10 @@ impl<'a> Probe<'a> {
         let forces = AppliedForces::default();
         newton::prepare_smooth_forces(model, state, &mut self.ws, &self.ctrl, &forces);
         self.ws.active.fill(false);
-        let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
-        // the contact frames of `inequality::prepare`, for the candidates that move
+        // the contact frames (and frozen disk rim points) of `inequality::prepare`, for the
+        // candidates that move
         for &c in contacts.iter().filter(|&&c| active[c]) {
-            let (wit, pa, pb) = witness(&model.contacts[c], &model.geoms, pose);
-            self.ws.contact_now[c] = ContactFrame::new(&wit, &pa, &pb);
+            crate::solver::inequality::prepare_candidate(model, state, &mut self.ws, c);
             self.ws.active[c] = true;
         }
         newton::evaluate_in(model, state, &mut self.ws, w, &mut self.residual, 0.0);

@@ -123,6 +123,13 @@ pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm:
 /// and the rim points of near-flat disk candidates, frozen for the step
 /// ([`crate::contact::disk_rim_for_step`]).
 pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
+    for c in 0..model.ncontact() {
+        prepare_candidate(model, state, ws, c);
+    }
+}
+
+/// [`prepare`] for candidate `c` alone.
+pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace, c: usize) {
     let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
     let h = model.options.timestep;
     let predicted = |b: usize| {
@@ -135,18 +142,17 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
             quat: p.quat * crate::math::quat::step_map(&w, h),
         }
     };
-    for (c, contact) in model.contacts.iter().enumerate() {
-        let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
-        ws.disk_rim[c] = crate::contact::disk_rim_for_step(
-            contact,
-            &model.geoms,
-            &predicted(ga.body),
-            &predicted(gb.body),
-            false,
-        );
-        let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.disk_rim[c]);
-        ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);
-    }
+    let contact = &model.contacts[c];
+    let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
+    ws.disk_rim[c] = crate::contact::disk_rim_for_step(
+        contact,
+        &model.geoms,
+        &predicted(ga.body),
+        &predicted(gb.body),
+        false,
+    );
+    let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.disk_rim[c]);
+    ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);
 }
 
 /// Largest distance (m) from a body's centre of mass to any point of `geom` (infinite for a
@@ -238,7 +244,10 @@ const DISK_REFREEZE_TOL: f64 = 1e-10;
 /// After a solve: every frozen disk–plane candidate whose exact lowest rim point at the new
 /// configuration is below `-DISK_REFREEZE_TOL` is re-frozen at that point (the velocity change
 /// of the step moved the lowest point away from the predicted one); returns how many were (the
-/// step must then be solved again).
+/// step must then be solved again). NOTE: the gradients re-derive frozen points from the state
+/// (`prepare_candidate`), so at a step that re-froze a disk they linearise the first freeze's
+/// residual, not the re-frozen one (rare: a near-flat disk whose velocity changed enough in
+/// the step to sink its predicted rim point).
 pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
     let mut n = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
