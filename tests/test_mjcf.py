@@ -147,6 +147,23 @@ def test_warnings_name_ignored_features():
         ukemi.Model.from_xml_path(str(ukemi.gymnasium_asset_path("swimmer")))
 
 
+def test_single_joint_equality_holds_joint_and_flags_ignored_polycoef():
+    """equality/joint without joint2 holds joint1 at qpos0 + polycoef[0] (MuJoCo's semantics);
+    explicit higher coefficients are ignored there, and the loader says so (line named)."""
+    xml = """<mujoco><worldbody><body pos="0 0 1">
+      <joint name="h" type="hinge" axis="0 1 0"/>
+      <geom type="capsule" fromto="0 0 0 0.5 0 0" size="0.05"/></body></worldbody>
+      <equality><joint joint1="h" polycoef="0.3 2 0 0 0"/></equality></mujoco>"""
+    with pytest.warns(UserWarning, match=r"<string>:4:.*only polycoef\[0\] is used"):
+        m = ukemi.Model.from_xml_string(xml)
+    tr = ukemi.rollout(m, m.make_state(qpos=[0.3]), nsteps=50)
+    np.testing.assert_allclose(tr.qpos[:, 0], 0.3, atol=1e-9)
+    quiet = xml.replace(' polycoef="0.3 2 0 0 0"', ' polycoef="0.3"')
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ukemi.Model.from_xml_string(quiet)
+
+
 def test_load_dispatches_on_suffix(tmp_path):
     m = ukemi.load(ukemi.gymnasium_asset_path("inverted_pendulum"))
     assert m.nq == 2

@@ -424,6 +424,19 @@ fn read_joint_coupling<'a, 'i>(
     let joint1 = joint("joint1")?.ok_or_else(|| ctx.err(e, "`joint1` is required"))?;
     let joint2 = joint("joint2")?;
     let polycoef = ctx.nums_padded(e, &class, "polycoef", &[0.0, 1.0, 0.0, 0.0, 0.0])?;
+    // the coefficients as written (the padding supplies MuJoCo's default polycoef[1] = 1)
+    let written = match ctx.raw(e, &class, "polycoef") {
+        Some(v) => ctx.floats(e, "polycoef", &v)?,
+        None => Vec::new(),
+    };
+    if joint2.is_none() && written.iter().skip(1).any(|&c| c != 0.0) {
+        // MuJoCo's semantics: without joint2 the constraint is joint1 = qpos0 + polycoef[0]
+        ctx.warn(
+            e,
+            "equality <joint> without `joint2`: only polycoef[0] is used (joint1 held at its \
+             qpos0 + polycoef[0]); the higher coefficients are ignored, as in MuJoCo",
+        );
+    }
     b.add_coupling(CouplingSpec {
         name,
         joint1,
