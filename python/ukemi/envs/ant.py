@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from ._com import cfrc_ext
-from .base import UkemiMujocoEnv
+from .base import UkemiMujocoEnv, planar_locomotion_reward
 
 
 class AntEnv(UkemiMujocoEnv):
@@ -87,18 +87,7 @@ class AntEnv(UkemiMujocoEnv):
 
     def _reward(self, before, action):
         x_velocity, y_velocity = (self._main_xy() - before) / self.dt
-        forward_reward = x_velocity * self._forward_reward_weight
-        healthy_reward = self.is_healthy * self._healthy_reward
-        ctrl_cost = self._ctrl_cost_weight * float(np.sum(np.square(action)))
-        contact_cost = self.contact_cost
-        terminated = (not self.is_healthy) and self._terminate_when_unhealthy
-        qpos = self.qpos
-        info = {"x_position": qpos[0], "y_position": qpos[1],
-                "distance_from_origin": float(np.linalg.norm(qpos[0:2])),
-                "x_velocity": x_velocity, "y_velocity": y_velocity,
-                "reward_forward": forward_reward, "reward_ctrl": -ctrl_cost,
-                "reward_contact": -contact_cost, "reward_survive": healthy_reward}
-        return forward_reward + healthy_reward - ctrl_cost - contact_cost, terminated, info
+        return planar_locomotion_reward(self, x_velocity, y_velocity, action)
 
     def _reset_model(self) -> None:
         s = self._reset_noise_scale

@@ -50,6 +50,25 @@ from ._assets import asset_path, load_model, mjcf_info, rotate
 from ._physics import step_rows
 
 
+def planar_locomotion_reward(env, x_velocity: float, y_velocity: float, action):
+    """MuJoCo v5's Ant/Humanoid reward: forward velocity + healthy bonus − control cost −
+    contact cost, with their termination rule and info keys. ``env`` provides the v5 weights
+    (``_forward_reward_weight``, ``_healthy_reward``, ``_ctrl_cost_weight``), ``is_healthy``,
+    ``contact_cost`` and ``_terminate_when_unhealthy``."""
+    forward_reward = env._forward_reward_weight * x_velocity
+    healthy_reward = env.is_healthy * env._healthy_reward
+    ctrl_cost = env._ctrl_cost_weight * float(np.sum(np.square(action)))
+    contact_cost = env.contact_cost
+    terminated = (not env.is_healthy) and env._terminate_when_unhealthy
+    qpos = env.qpos
+    info = {"x_position": qpos[0], "y_position": qpos[1],
+            "distance_from_origin": float(np.linalg.norm(qpos[0:2])),
+            "x_velocity": x_velocity, "y_velocity": y_velocity,
+            "reward_survive": healthy_reward, "reward_forward": forward_reward,
+            "reward_ctrl": -ctrl_cost, "reward_contact": -contact_cost}
+    return forward_reward + healthy_reward - ctrl_cost - contact_cost, terminated, info
+
+
 class SolverFailureWarning(RuntimeWarning):
     """An env step's solve did not converge; the episode was truncated."""
 

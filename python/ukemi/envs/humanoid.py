@@ -14,7 +14,7 @@ import numpy as np
 
 from ._assets import rotate
 from ._com import cfrc_ext, subtree_com
-from .base import UkemiMujocoEnv
+from .base import UkemiMujocoEnv, planar_locomotion_reward
 
 
 def quat_matrix(quat: np.ndarray) -> np.ndarray:
@@ -170,18 +170,7 @@ class HumanoidEnv(UkemiMujocoEnv):
     def _reward(self, before, action):
         self._last_ctrl = np.asarray(action, np.float64)
         x_velocity, y_velocity = (self.mass_center() - before) / self.dt
-        forward_reward = self._forward_reward_weight * x_velocity
-        healthy_reward = self.is_healthy * self._healthy_reward
-        ctrl_cost = self._ctrl_cost_weight * float(np.sum(np.square(action)))
-        contact_cost = self.contact_cost
-        terminated = (not self.is_healthy) and self._terminate_when_unhealthy
-        qpos = self.qpos
-        info = {"x_position": qpos[0], "y_position": qpos[1],
-                "distance_from_origin": float(np.linalg.norm(qpos[0:2])),
-                "x_velocity": x_velocity, "y_velocity": y_velocity,
-                "reward_survive": healthy_reward, "reward_forward": forward_reward,
-                "reward_ctrl": -ctrl_cost, "reward_contact": -contact_cost}
-        return forward_reward + healthy_reward - ctrl_cost - contact_cost, terminated, info
+        return planar_locomotion_reward(self, x_velocity, y_velocity, action)
 
     def _reset_model(self) -> None:
         self._last_ctrl = None
