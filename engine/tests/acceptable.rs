@@ -65,14 +65,10 @@ fn unreachable_tolerance_ends_acceptable_within_the_acceptable_bounds() {
     let dz = (state.pose(1).pos - reference.pose(1).pos).norm();
     assert!(dz < 1e-8, "acceptable trajectory differs by {dz:e} m");
 
-    // with acceptance off the same stalls are failures
+    // with acceptance off the same stalls are failures (the first steps are free fall, whose
+    // residual can be exactly zero; the stalls come with contact)
     o.acceptable_rtol = 0.0;
-    let (reports, _) = {
-        let model = base.with_options(o).unwrap();
-        let mut state = State::reference(&model);
-        let mut ws = Workspace::new(&model);
-        let r = step(&model, &mut state, &mut ws, &[]).unwrap();
-        (vec![r], state)
-    };
-    assert!(!reports[0].status.is_success(), "{:?}", reports[0]);
+    let (reports, _) = statuses(&base.with_options(o).unwrap());
+    let failed = reports.iter().filter(|r| !r.0.is_success()).count();
+    assert!(failed > 0, "no step failed with acceptance off");
 }
