@@ -25,8 +25,8 @@ pub struct State {
     pub angvel_b: Vec<f64>,
     /// Joint constraint impulses of the last step (N·s), the solver's warm start. Shape (ncon,).
     pub joint_impulse: Vec<f64>,
-    /// Interior-point variables of every contact candidate then every joint limit (their node
-    /// layouts, see `solver::inequality`), from the last step.
+    /// Interior-point variables of every contact candidate, then every joint limit, then every
+    /// tendon limit (their node layouts, see `solver::inequality`), from the last step.
     pub ineq_vars: Vec<f64>,
     pub(crate) topology_id: u64,
 }
@@ -142,6 +142,7 @@ fn neutral_ineq_vars(model: &Model) -> Vec<f64> {
         v.extend(x);
     }
     v.extend(std::iter::repeat_n(1.0, 4 * model.nlimit()));
+    v.extend(std::iter::repeat_n(1.0, 4 * model.tendon_limits.len()));
     v
 }
 
