@@ -164,6 +164,17 @@ impl State {
         }
         out
     }
+
+    /// Impulse of each tendon limit in the last step, `γ_lo - γ_hi` (N·s for slide terms, N·m·s
+    /// for hinge terms, per unit of coef): positive pushes the length up off its lower limit.
+    /// Shape (n tendon limits,).
+    pub fn tendon_impulse(&self, model: &Model) -> Vec<f64> {
+        let start = self.ineq_vars.len() - 4 * model.tendon_limits.len();
+        self.ineq_vars[start..]
+            .chunks_exact(4)
+            .map(|x| x[0] - x[2])
+            .collect()
+    }
 }
 
 /// How a solve ended.

@@ -68,9 +68,10 @@ pub(super) fn read_tendons<'a, 'i>(
             let range = match range.as_deref() {
                 Some(&[lo, hi]) if lo < hi => (lo, hi),
                 _ => {
+                    let got = ctx.raw(t, &class, "range").unwrap_or_else(|| "(none)".into());
                     return Err(ctx.err(
                         t,
-                        format!("limited tendon {name:?}: attribute `range` = {range:?}, need lower < upper"),
+                        format!("limited tendon {name:?}: attribute `range` = {got:?}, need lower < upper"),
                     ));
                 }
             };
