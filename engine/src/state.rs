@@ -165,6 +165,14 @@ impl State {
         out
     }
 
+    /// Length `Σ coef q` of each tendon limit's tendon (m or rad). Shape (n tendon limits,).
+    pub fn tendon_length(&self, model: &Model) -> Vec<f64> {
+        let q = crate::joints::coordinates::qpos(model, self);
+        // hinge/slide terms only: the term's dof is its qpos index within the joint
+        let at = |j: usize, d: usize| q[model.joints[j].qpos_adr + d];
+        model.tendon_limits.iter().map(|t| t.length(at)).collect()
+    }
+
     /// Impulse of each tendon limit in the last step, `γ_lo - γ_hi` (N·s for slide terms, N·m·s
     /// for hinge terms, per unit of coef): positive pushes the length up off its lower limit.
     /// Shape (n tendon limits,).
