@@ -172,8 +172,14 @@ impl PyModelBuilder {
         Ok(())
     }
 
-    fn add_tendon_limit(&mut self, name: String, terms: Vec<(String, usize, f64)>, range: (f64, f64)) {
-        self.inner.add_tendon_limit(ukemi_engine::model::TendonLimitSpec { name, terms, range });
+    fn add_tendon_limit(
+        &mut self,
+        name: String,
+        terms: Vec<(String, usize, f64)>,
+        range: (f64, f64),
+    ) {
+        self.inner
+            .add_tendon_limit(ukemi_engine::model::TendonLimitSpec { name, terms, range });
     }
 
     fn add_exclude(&mut self, body_a: &str, body_b: &str) {
@@ -260,7 +266,11 @@ impl PyModel {
     /// Names of the tendon limits (limited fixed tendons).
     #[getter]
     fn tendon_limit_names(&self) -> Vec<String> {
-        self.inner.tendon_limits.iter().map(|t| t.name.clone()).collect()
+        self.inner
+            .tendon_limits
+            .iter()
+            .map(|t| t.name.clone())
+            .collect()
     }
     /// Range `(lo, hi)` of each tendon limit, (n, 2).
     #[getter]

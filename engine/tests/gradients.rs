@@ -329,7 +329,12 @@ fn tendon_chain(n: usize) -> Model {
                     .anchors(pa, [0.0, 0.0, 0.5])
                     .damping(0.2),
             )
-            .actuator(ActuatorSpec::motor(&format!("m{i}"), &format!("j{i}"), 0, 1.0));
+            .actuator(ActuatorSpec::motor(
+                &format!("m{i}"),
+                &format!("j{i}"),
+                0,
+                1.0,
+            ));
     }
     b.add_tendon_limit(TendonLimitSpec {
         name: "t".into(),
@@ -343,12 +348,19 @@ fn tendon_chain(n: usize) -> Model {
 fn tendon_limit_jacobians_match_the_smoothed_step() {
     let m = tendon_chain(5);
     // L = -0.295, moving down into the lower limit
-    let s = moving_state(&m, &[-0.3, 0.2, 0.29, 0.1, -0.2], &[-1.0, 0.5, 1.0, 0.3, 0.2]);
+    let s = moving_state(
+        &m,
+        &[-0.3, 0.2, 0.29, 0.1, -0.2],
+        &[-1.0, 0.5, 1.0, 0.3, 0.2],
+    );
     let ctrl = [-1.0, 0.5, 2.0, 0.1, -0.1];
     let mut probe = s.clone();
     step(&m, &mut probe, &mut Workspace::new(&m), &ctrl).unwrap();
     let imp = probe.tendon_impulse(&m)[0];
-    assert!(imp > 1e-3, "the limit must be active in this step: impulse {imp:e}");
+    assert!(
+        imp > 1e-3,
+        "the limit must be active in this step: impulse {imp:e}"
+    );
     for kappa in [1e-4, 1e-6] {
         let e = check(&m, &s, &ctrl, Coordinates::Minimal, Some(kappa), 1e-5);
         eprintln!("tendon limit kappa {kappa:e}: max rel err {e:e}");

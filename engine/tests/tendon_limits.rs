@@ -72,7 +72,10 @@ fn tendon_limit_holds_carries_the_holding_torque_and_releases() {
         qd[0].abs().max(qd[1].abs())
     );
     assert!(worst < 1e-8, "tendon limit violated by {worst:.3e}");
-    assert!((len - RANGE.0).abs() < 1e-8, "should rest on the limit: L = {len}");
+    assert!(
+        (len - RANGE.0).abs() < 1e-8,
+        "should rest on the limit: L = {len}"
+    );
     assert!(qd.iter().all(|v| v.abs() < 1e-6), "not at rest: {qd:?}");
     assert!(
         (held - force).abs() < 1e-6 * force,
@@ -87,7 +90,10 @@ fn tendon_limit_holds_carries_the_holding_torque_and_releases() {
     }
     let len = length(&model, &state);
     let imp = state.tendon_impulse(&model)[0];
-    eprintln!("released: L - lo = {:.3e}, impulse {imp:.2e}", len - RANGE.0);
+    eprintln!(
+        "released: L - lo = {:.3e}, impulse {imp:.2e}",
+        len - RANGE.0
+    );
     assert!(len > RANGE.0 + 0.05, "still at the limit: L = {len}");
     assert!(imp.abs() < 1e-9, "released tendon still pushes: {imp:e}");
 }
@@ -128,7 +134,10 @@ fn inside_the_range_the_limited_arm_moves_as_the_free_one() {
         step(&free, &mut a, &mut wa, &u).unwrap();
         step(&limited, &mut b, &mut wb, &u).unwrap();
         let l = length(&limited, &b);
-        assert!(l > RANGE.0 + 0.05 && l < RANGE.1 - 0.05, "reached the range: {l}");
+        assert!(
+            l > RANGE.0 + 0.05 && l < RANGE.1 - 0.05,
+            "reached the range: {l}"
+        );
         let (qa, qb) = (qpos(&free, &a), qpos(&limited, &b));
         worst = worst.max((qa[0] - qb[0]).abs().max((qa[1] - qb[1]).abs()));
     }
@@ -147,7 +156,10 @@ fn bad_tendon_limits_are_errors_naming_the_field() {
             .joint(JointSpec::new("j2", JointKind::Spherical, "l1", "l2"));
         b.add_tendon_limit(TendonLimitSpec {
             name: "t".into(),
-            terms: terms.into_iter().map(|(j, d, c)| (j.to_string(), d, c)).collect(),
+            terms: terms
+                .into_iter()
+                .map(|(j, d, c)| (j.to_string(), d, c))
+                .collect(),
             range,
         });
         b.compile().unwrap_err().to_string()
@@ -187,6 +199,11 @@ fn mjcf_limited_fixed_tendons_are_enforced_without_warnings() {
     assert_eq!(m.model.tendon_limits.len(), 1);
     assert_eq!(m.model.tendon_limits[0].range, (-0.3, 2.0));
     let bad = xml.replace("range=\"-0.3 2\"", "range=\"2 -0.3\"");
-    let e = ukemi_engine::mjcf::load_str(&bad, "t.xml").unwrap_err().to_string();
-    assert!(e.contains("t.xml:11") && e.contains("`range` = \"2 -0.3\""), "{e}");
+    let e = ukemi_engine::mjcf::load_str(&bad, "t.xml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("t.xml:11") && e.contains("`range` = \"2 -0.3\""),
+        "{e}"
+    );
 }

@@ -39,7 +39,9 @@ pub(super) fn read_tendons<'a, 'i>(
         let limited = limited.unwrap_or(ctx.compiler.autolimits && range.is_some());
         if t.tag_name().name() != "fixed" {
             let what = if limited {
-                format!("spatial tendon {name:?} ignored: its range {range:?} is NOT enforced (spatial tendons are not supported)")
+                format!(
+                    "spatial tendon {name:?} ignored: its range {range:?} is NOT enforced (spatial tendons are not supported)"
+                )
             } else {
                 "spatial tendon ignored (no stiffness, damping or limits; actuators cannot use it)"
                     .to_string()
@@ -50,9 +52,10 @@ pub(super) fn read_tendons<'a, 'i>(
         let mut terms = Vec::new();
         for j in elements(t) {
             let jn = j.attribute("joint").unwrap_or("");
-            let map = tree.joints.iter().find(|m| m.name == jn).ok_or_else(|| {
-                ctx.err(j, format!("attribute `joint` = {jn:?}: unknown joint"))
-            })?;
+            let map =
+                tree.joints.iter().find(|m| m.name == jn).ok_or_else(|| {
+                    ctx.err(j, format!("attribute `joint` = {jn:?}: unknown joint"))
+                })?;
             if map.kind != "hinge" && map.kind != "slide" {
                 return Err(ctx.unsupported(j, format!("fixed tendon on a {} joint", map.kind)));
             }
@@ -68,7 +71,9 @@ pub(super) fn read_tendons<'a, 'i>(
             let range = match range.as_deref() {
                 Some(&[lo, hi]) if lo < hi => (lo, hi),
                 _ => {
-                    let got = ctx.raw(t, &class, "range").unwrap_or_else(|| "(none)".into());
+                    let got = ctx
+                        .raw(t, &class, "range")
+                        .unwrap_or_else(|| "(none)".into());
                     return Err(ctx.err(
                         t,
                         format!("limited tendon {name:?}: attribute `range` = {got:?}, need lower < upper"),

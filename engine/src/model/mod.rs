@@ -17,8 +17,8 @@ use nalgebra::{Matrix3, Vector3};
 use crate::contact::{Contact, Geom};
 use crate::joints::Joint;
 use crate::joints::coupling::Coupling;
-use crate::joints::tendon::TendonLimit;
 use crate::joints::geometry::Pose;
+use crate::joints::tendon::TendonLimit;
 
 /// A rigid body. Body 0 is the world.
 #[derive(Clone, Debug)]

@@ -799,8 +799,11 @@ mod tests {
         for (i, kind) in kinds.iter().enumerate() {
             let name = format!("b{i}");
             b = b.body(
-                BodySpec::new(&name, 1.0 + 0.3 * i as f64, [0.1, 0.2, 0.15])
-                    .pos([0.0, 0.0, -0.5 - i as f64]),
+                BodySpec::new(&name, 1.0 + 0.3 * i as f64, [0.1, 0.2, 0.15]).pos([
+                    0.0,
+                    0.0,
+                    -0.5 - i as f64,
+                ]),
             );
             let parent = if i == 0 {
                 "world".into()

@@ -14,7 +14,11 @@ use crate::model::topology_body_node as body_node;
 use crate::state::Workspace;
 
 fn next(ws: &Workspace, b: usize) -> Pose {
-    if b == 0 { Pose::world() } else { ws.next_pose[b] }
+    if b == 0 {
+        Pose::world()
+    } else {
+        ws.next_pose[b]
+    }
 }
 
 /// Length of tendon limit `t` at the next configuration (`ws.next_pose`).
