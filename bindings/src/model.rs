@@ -172,6 +172,16 @@ impl PyModelBuilder {
         Ok(())
     }
 
+    fn add_tendon_limit(
+        &mut self,
+        name: String,
+        terms: Vec<(String, usize, f64)>,
+        range: (f64, f64),
+    ) {
+        self.inner
+            .add_tendon_limit(ukemi_engine::model::TendonLimitSpec { name, terms, range });
+    }
+
     fn add_exclude(&mut self, body_a: &str, body_b: &str) {
         self.inner.add_exclude(body_a, body_b);
     }
@@ -252,6 +262,26 @@ impl PyModel {
     #[getter]
     fn nlimit(&self) -> usize {
         self.inner.nlimit()
+    }
+    /// Names of the tendon limits (limited fixed tendons).
+    #[getter]
+    fn tendon_limit_names(&self) -> Vec<String> {
+        self.inner
+            .tendon_limits
+            .iter()
+            .map(|t| t.name.clone())
+            .collect()
+    }
+    /// Range `(lo, hi)` of each tendon limit, (n, 2).
+    #[getter]
+    fn tendon_limit_range<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let flat: Vec<f64> = self
+            .inner
+            .tendon_limits
+            .iter()
+            .flat_map(|t| [t.range.0, t.range.1])
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([self.inner.tendon_limits.len(), 2])
     }
     /// Unknowns of one step per effect (what the scene pays for).
     #[getter]

@@ -71,6 +71,18 @@ impl PyState {
     fn contact_impulse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         array2(py, self.inner.contact_impulse(&self.model), 3)
     }
+    /// Length `Σ coef qpos` of each tendon limit's tendon (m or rad), (n tendon limits,).
+    #[getter]
+    fn tendon_length<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.tendon_length(&self.model))
+    }
+    /// Impulse `γ_lo - γ_hi` of each tendon limit in the last step (N·s or N·m·s per unit
+    /// coef; positive pushes the length up), (n tendon limits,). Divide by the time step for
+    /// forces.
+    #[getter]
+    fn tendon_impulse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.tendon_impulse(&self.model))
+    }
     /// Discrete linear momentum (kg·m/s), (3,).
     fn linear_momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_slice(

@@ -25,8 +25,8 @@ pub struct State {
     pub angvel_b: Vec<f64>,
     /// Joint constraint impulses of the last step (N·s), the solver's warm start. Shape (ncon,).
     pub joint_impulse: Vec<f64>,
-    /// Interior-point variables of every contact candidate then every joint limit (their node
-    /// layouts, see `solver::inequality`), from the last step.
+    /// Interior-point variables of every contact candidate, then every joint limit, then every
+    /// tendon limit (their node layouts, see `solver::inequality`), from the last step.
     pub ineq_vars: Vec<f64>,
     pub(crate) topology_id: u64,
 }
@@ -142,6 +142,7 @@ fn neutral_ineq_vars(model: &Model) -> Vec<f64> {
         v.extend(x);
     }
     v.extend(std::iter::repeat_n(1.0, 4 * model.nlimit()));
+    v.extend(std::iter::repeat_n(1.0, 4 * model.tendon_limits.len()));
     v
 }
 
@@ -162,6 +163,25 @@ impl State {
             k += c.model.dim();
         }
         out
+    }
+
+    /// Length `Σ coef q` of each tendon limit's tendon (m or rad). Shape (n tendon limits,).
+    pub fn tendon_length(&self, model: &Model) -> Vec<f64> {
+        let q = crate::joints::coordinates::qpos(model, self);
+        // hinge/slide terms only: the term's dof is its qpos index within the joint
+        let at = |j: usize, d: usize| q[model.joints[j].qpos_adr + d];
+        model.tendon_limits.iter().map(|t| t.length(at)).collect()
+    }
+
+    /// Impulse of each tendon limit in the last step, `γ_lo - γ_hi` (N·s for slide terms, N·m·s
+    /// for hinge terms, per unit of coef): positive pushes the length up off its lower limit.
+    /// Shape (n tendon limits,).
+    pub fn tendon_impulse(&self, model: &Model) -> Vec<f64> {
+        let start = self.ineq_vars.len() - 4 * model.tendon_limits.len();
+        self.ineq_vars[start..]
+            .chunks_exact(4)
+            .map(|x| x[0] - x[2])
+            .collect()
     }
 }
 

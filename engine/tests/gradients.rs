@@ -312,6 +312,68 @@ fn joint_limit_jacobians_match_the_smoothed_step() {
     eprintln!("limit: max rel err {e:e}");
 }
 
+/// `n` hinges with a tendon limit on `½ q₀ - ½ q₂` (non-adjacent joints: the tendon node
+/// touches three bodies and is eliminated last) and a motor per hinge.
+fn tendon_chain(n: usize) -> Model {
+    use ukemi_engine::model::TendonLimitSpec;
+    let mut b = ModelBuilder::new().timestep(0.01);
+    for i in 0..n {
+        let (name, parent) = (format!("l{i}"), format!("l{}", i.max(1) - 1));
+        let parent = if i == 0 { "world" } else { parent.as_str() };
+        let pa = if i == 0 { [0.0; 3] } else { [0.0, 0.0, -0.5] };
+        b = b
+            .body(BodySpec::new(&name, 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5 - i as f64]))
+            .joint(
+                JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
+                    .axis([0.0, 1.0, 0.0])
+                    .anchors(pa, [0.0, 0.0, 0.5])
+                    .damping(0.2),
+            )
+            .actuator(ActuatorSpec::motor(
+                &format!("m{i}"),
+                &format!("j{i}"),
+                0,
+                1.0,
+            ));
+    }
+    b.add_tendon_limit(TendonLimitSpec {
+        name: "t".into(),
+        terms: vec![("j0".into(), 0, 0.5), ("j2".into(), 0, -0.5)],
+        range: (-0.3, 2.0),
+    });
+    tight(b.compile().unwrap())
+}
+
+#[test]
+fn tendon_limit_jacobians_match_the_smoothed_step() {
+    let m = tendon_chain(5);
+    // L = -0.295, moving down into the lower limit
+    let s = moving_state(
+        &m,
+        &[-0.3, 0.2, 0.29, 0.1, -0.2],
+        &[-1.0, 0.5, 1.0, 0.3, 0.2],
+    );
+    let ctrl = [-1.0, 0.5, 2.0, 0.1, -0.1];
+    let mut probe = s.clone();
+    step(&m, &mut probe, &mut Workspace::new(&m), &ctrl).unwrap();
+    let imp = probe.tendon_impulse(&m)[0];
+    assert!(
+        imp > 1e-3,
+        "the limit must be active in this step: impulse {imp:e}"
+    );
+    for kappa in [1e-4, 1e-6] {
+        let e = check(&m, &s, &ctrl, Coordinates::Minimal, Some(kappa), 1e-5);
+        eprintln!("tendon limit kappa {kappa:e}: max rel err {e:e}");
+    }
+    // the active set is strictly complementary: the hard step is smooth here too
+    let e = check(&m, &s, &ctrl, Coordinates::Minimal, None, 1e-5);
+    eprintln!("tendon limit, hard: max rel err {e:e}");
+    for kappa in [None, Some(1e-4)] {
+        coloured_vs_reference(&m, &s, &ctrl, Coordinates::Minimal, kappa);
+        coloured_vs_reference(&m, &s, &ctrl, Coordinates::Maximal, kappa);
+    }
+}
+
 #[test]
 fn a_failed_step_gives_no_gradient() {
     let m0 = ball_on_floor(ContactModel::Nonlinear, 0.5);

@@ -2,7 +2,7 @@
 
 1. Effect ladder: the same mechanism (a 4-link pendulum chain of capsules swinging over a floor)
    with effects switched on one by one: no contact -> impact only -> nonlinear friction cone ->
-   pyramid -> joint limits. Prints the step's variable counts, Newton iterations and time.
+   pyramid -> joint limits -> tendon limits (and tendon limits alone, without contact). Prints the step's variable counts, Newton iterations and time.
 2. Warm start: iterations and time per step with and without warm start for the contact scenes
    of the test suite (drops, sliding box, 5-box stack).
 
@@ -19,7 +19,7 @@ import numpy as np
 import ukemi
 
 
-def chain(contact: str | None, limits: bool):
+def chain(contact: str | None, limits: bool, tendons: bool = False):
     b = ukemi.ModelBuilder(timestep=0.01)
     if contact is not None:
         b.add_geom("floor", "world", "plane", pos=(0, 0, -3.6), friction=0.8, contact=contact)
@@ -31,6 +31,11 @@ def chain(contact: str | None, limits: bool):
         if contact is not None:
             b.add_geom(f"c{i}", f"l{i}", "capsule", size=(0.05, 0.45), friction=0.8,
                        contact=contact)
+    if tendons:
+        # hamstring-like couplings of neighbouring hinges: |½ q_i - ½ q_i+1| <= 0.3
+        for i in (0, 2):
+            b.add_tendon_limit(f"t{i}", terms=[(f"j{i}", 0.5), (f"j{i + 1}", -0.5)],
+                               range=(-0.3, 0.3))
     return b.compile()
 
 
@@ -45,11 +50,14 @@ def timed(model, state, steps):
 def ladder(steps: int) -> None:
     print("effect ladder (4-link chain, h = 0.01 s, swinging into a floor)")
     print(f"{'effects':<28} {'variables':>9} {'it/step':>8} {'µs/step':>9} {'failed':>7}")
-    rungs = [("no contact", None, False), ("+ impact", "impact", False),
-             ("+ friction cone", "nonlinear", False), ("pyramid instead", "linear", False),
-             ("+ joint limits", "nonlinear", True)]
-    for name, contact, limits in rungs:
-        m = chain(contact, limits)
+    rungs = [("no contact", None, False, False), ("+ impact", "impact", False, False),
+             ("+ friction cone", "nonlinear", False, False),
+             ("pyramid instead", "linear", False, False),
+             ("+ joint limits", "nonlinear", True, False),
+             ("+ tendon limits", "nonlinear", True, True),
+             ("tendon limits, no contact", None, False, True)]
+    for name, contact, limits, tendons in rungs:
+        m = chain(contact, limits, tendons)
         s = m.make_state(qpos=[1.2, 0.3, -0.2, 0.1])
         dt, tr = timed(m, s, steps)
         nvar = sum(c for _, c in m.variable_counts)

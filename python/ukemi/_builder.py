@@ -168,6 +168,34 @@ class ModelBuilder:
                          as_vector("quat", quat, 4), as_scalar("friction", friction), contact,
                          _bits("contype", contype), _bits("conaffinity", conaffinity))
 
+    def add_tendon_limit(self, name: str, terms, range) -> None:
+        """Limit a fixed tendon (MuJoCo's limited ``<tendon><fixed>``): ``lo <= Σ coef·q <= hi``.
+
+        Solved as a hard inequality in the same interior-point step as contacts and joint limits;
+        the tendon impulse acts on each term's coordinate as ``coef · impulse``.
+
+        Args:
+            name: Unique name.
+            terms: ``[(joint, coef), ...]`` or ``[(joint, coef, dof), ...]``: a hinge or slide
+                coordinate (``dof``, default 0, a free dof of the joint in its qvel order; not a
+                ball quaternion) and its coefficient. At least one coef must be non-zero.
+            range: ``(lo, hi)`` of the length ``Σ coef·q`` (m or rad), ``lo < hi``.
+        """
+        if isinstance(terms, (str, bytes)) or not hasattr(terms, "__iter__"):
+            raise TypeError(f"tendon_limit[{name}].terms must be a list of (joint, coef[, dof]), got {terms!r}")
+        parsed = []
+        for i, term in enumerate(terms):
+            if isinstance(term, (str, bytes)) or not hasattr(term, "__len__") or len(term) not in (2, 3):
+                raise TypeError(f"tendon_limit[{name}].terms[{i}] must be (joint, coef) or (joint, coef, dof), "
+                                f"got {term!r}")
+            joint, coef, *rest = term
+            dof = rest[0] if rest else 0
+            if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or dof < 0:
+                raise TypeError(f"tendon_limit[{name}].terms[{i}] dof must be a non-negative integer, got {dof!r}")
+            parsed.append((str(joint), int(dof), as_scalar(f"tendon_limit[{name}].terms[{i}].coef", coef)))
+        lo, hi = as_vector(f"tendon_limit[{name}].range", range, 2)
+        self._b.add_tendon_limit(str(name), parsed, (lo, hi))
+
     def add_exclude(self, body_a: str, body_b: str) -> None:
         """Never collide the geoms of these two bodies (MuJoCo's ``contact/exclude``)."""
         self._b.add_exclude(str(body_a), str(body_b))

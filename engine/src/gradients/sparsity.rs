@@ -4,8 +4,10 @@
 //! A perturbed input changes the residual only near the bodies it touches: their body rows and
 //! those of their neighbours in the *interaction graph* (bodies sharing a joint, a joint
 //! coupling or an actuator transmission), the joint, limit and coupling nodes of their joints,
-//! and the nodes of the contact candidates whose geometry it moves together with the rows of
-//! those candidates' two bodies.
+//! the tendon-limit nodes over their joints, and the nodes of the contact candidates whose
+//! geometry it moves together with the rows of those candidates' two bodies. (A tendon limit
+//! links no bodies: its impulse acts on each term's bodies through that joint's own free
+//! Jacobian, and only its node's rows read the other terms' coordinates.)
 //! Columns whose supports are disjoint can be perturbed in one residual evaluation and
 //! separated afterwards by their supports; the graph is fixed by the model's topology.
 use crate::model::Model;
@@ -129,6 +131,11 @@ impl Support {
         for (k, blocks) in t.coupling_blocks.iter().enumerate() {
             if blocks.iter().any(|&(b, _)| is_touched[b]) {
                 nodes.push(t.coupling_node[k]);
+            }
+        }
+        for (k, blocks) in t.tendon_blocks.iter().enumerate() {
+            if blocks.iter().any(|&(b, _)| is_touched[b]) {
+                nodes.push(t.tendon_node[k]);
             }
         }
         nodes.extend(cs.iter().map(|&c| t.contact_node[c]));

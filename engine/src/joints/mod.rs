@@ -11,6 +11,7 @@ pub mod geometry;
 pub mod hinges;
 mod kind;
 pub mod offsets;
+pub mod tendon;
 
 pub use kind::JointKind;
 

@@ -6,12 +6,10 @@ use roxmltree::Node;
 
 use super::body::Tree;
 use super::parse::{Ctx, elements};
+use super::tendon::Tendons;
 use crate::model::Keyframe;
 use crate::model::{CouplingSpec, TransmissionSpec};
 use crate::{ActuatorSpec, JointKind, JointSpec, ModelBuilder, Result};
-
-/// Fixed tendons by name: `(engine joint, free dof, coef)` per MJCF joint term.
-pub(super) type Tendons = std::collections::HashMap<String, Vec<(String, usize, f64)>>;
 
 pub(super) fn read_actuators<'a, 'i>(
     ctx: &mut Ctx<'a, 'i>,
@@ -141,63 +139,6 @@ fn transmission<'a, 'i>(
         return Err(ctx.unsupported(a, format!("actuator {name:?} on a {} joint", map.kind)));
     }
     Ok((map.engine_joint.clone(), map.dof, TransmissionSpec::Joint))
-}
-
-/// Fixed tendons (used by actuators). Limits are not enforced (warned); stiffness, damping and
-/// friction are unsupported; spatial tendons are unsupported when anything uses them.
-pub(super) fn read_tendons<'a, 'i>(
-    ctx: &mut Ctx<'a, 'i>,
-    root: Node<'a, 'i>,
-    tree: &Tree,
-) -> Result<Tendons> {
-    let mut out = Tendons::new();
-    for node in elements(root).filter(|n| n.tag_name().name() == "tendon") {
-        for t in elements(node) {
-            let class = ctx.class_of(t, "main")?;
-            let name = t.attribute("name").unwrap_or("").to_string();
-            let active = ["stiffness", "damping", "frictionloss"].iter().any(|a| {
-                ctx.raw(t, &class, a)
-                    .is_some_and(|v| v.trim().parse::<f64>() != Ok(0.0))
-            });
-            if active {
-                return Err(ctx.unsupported(
-                    t,
-                    "tendons with stiffness, damping or friction are not supported",
-                ));
-            }
-            let limited = ctx.tristate(t, &class, "limited")?;
-            let range = ctx.nums(t, &class, "range", 2)?;
-            if limited.unwrap_or(ctx.compiler.autolimits && range.is_some()) {
-                // NOTE: a tendon limit is an inequality on Σ coef q across joints; ukemi has
-                // limits per joint only, so this one is reported, never silently dropped
-                ctx.warn(
-                    t,
-                    format!("tendon {name:?} range {range:?} is NOT enforced (tendon limits are not supported): trajectories differ from MuJoCo whenever the tendon length leaves its range"),
-                );
-            }
-            if t.tag_name().name() != "fixed" {
-                ctx.warn(t, "spatial tendon ignored (no stiffness, damping or limits; actuators cannot use it)");
-                continue;
-            }
-            let mut terms = Vec::new();
-            for j in elements(t) {
-                let jn = j.attribute("joint").unwrap_or("");
-                let map = tree.joints.iter().find(|m| m.name == jn).ok_or_else(|| {
-                    ctx.err(j, format!("attribute `joint` = {jn:?}: unknown joint"))
-                })?;
-                if map.kind != "hinge" && map.kind != "slide" {
-                    return Err(ctx.unsupported(j, format!("fixed tendon on a {} joint", map.kind)));
-                }
-                terms.push((
-                    map.engine_joint.clone(),
-                    map.dof,
-                    ctx.num(j, "", "coef", 0.0)?,
-                ));
-            }
-            out.insert(name, terms);
-        }
-    }
-    Ok(out)
 }
 
 /// MuJoCo's gain and affine bias of each actuator shortcut.

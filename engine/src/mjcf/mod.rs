@@ -7,8 +7,9 @@
 //! one body become one engine joint with MuJoCo's dofs in MuJoCo's order, each hinge about its
 //! own anchor), geoms with contact bit masks and `condim` 1 or 3, `contact/exclude`, `equality`
 //! connect/weld (loop joints) and joint (a polynomial coupling solved with the joints), fixed
-//! tendons as actuator transmissions, `actuator` motor/position/velocity/general on joints,
-//! fixed tendons and sites (with `forcerange`), and `keyframe`.
+//! tendons as actuator transmissions and, when limited, as hard tendon limits (inequalities
+//! solved with the contacts), `actuator` motor/position/velocity/general on joints, fixed
+//! tendons and sites (with `forcerange`), and `keyframe`.
 //!
 //! Anything else is an [`Error::Unsupported`] or an [`Error::Mjcf`] naming the element and its
 //! line, or — where ignoring it only drops an effect ukemi does not model (solver settings,
@@ -24,7 +25,8 @@
 //! * Geom pairs whose shapes have no collision kernel (e.g. capsule–cylinder) never collide;
 //!   each is reported as a warning.
 //! * Position/velocity servos act at the current configuration (explicit), like springs.
-//! * Fixed-tendon limits are not enforced; each one is reported as a warning.
+//! * Fixed-tendon limits are hard inequalities (MuJoCo's are soft: `solreflimit`/`solimplimit`,
+//!   `margin`), like joint limits; limits of spatial tendons are not enforced (a warning).
 //! * `equality/joint` is a hard holonomic constraint (MuJoCo's is soft: `solref`/`solimp`).
 mod actuator;
 mod body;
@@ -34,6 +36,7 @@ mod geom;
 mod inertia;
 mod joint;
 mod parse;
+mod tendon;
 
 use std::path::Path;
 
@@ -106,7 +109,7 @@ pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
     b.set_condim_max(true);
     read_option(&mut ctx, root, &mut b)?;
     let tree = read_tree(&mut ctx, root, &mut b)?;
-    let tendons = actuator::read_tendons(&mut ctx, root, &tree)?;
+    let tendons = tendon::read_tendons(&mut ctx, root, &tree, &mut b)?;
     for node in elements(root) {
         match node.tag_name().name() {
             "actuator" => actuator::read_actuators(&mut ctx, node, &tree, &tendons, &mut b)?,

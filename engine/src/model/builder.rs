@@ -2,7 +2,8 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::transmission::{
-    CouplingSpec, TransmissionSpec, compile_couplings, compile_transmission,
+    CouplingSpec, TendonLimitSpec, TransmissionSpec, compile_couplings, compile_tendon_limits,
+    compile_transmission,
 };
 use super::{Actuator, Body, Model, Options, Topology};
 use crate::contact::geometry::{self, Shape};
@@ -283,6 +284,7 @@ pub struct ModelBuilder {
     geom_excludes: Vec<(String, String)>,
     condim_max: bool,
     couplings: Vec<CouplingSpec>,
+    tendon_limits: Vec<TendonLimitSpec>,
 }
 
 impl ModelBuilder {
@@ -330,6 +332,10 @@ impl ModelBuilder {
     /// Add a joint coupling (MuJoCo's `equality/joint`).
     pub fn add_coupling(&mut self, c: CouplingSpec) {
         self.couplings.push(c);
+    }
+    /// Add a fixed-tendon limit (MuJoCo's limited `<tendon><fixed>`).
+    pub fn add_tendon_limit(&mut self, t: TendonLimitSpec) {
+        self.tendon_limits.push(t);
     }
     /// Add a collision geometry (fluent).
     pub fn geom(mut self, g: GeomSpec) -> Self {
@@ -379,6 +385,7 @@ impl ModelBuilder {
         let geoms = self.compile_geoms(&names, &bodies)?;
         let contacts = self.compile_pairs(&geoms, &joints, &names)?;
         let couplings = compile_couplings(&self.couplings, &joints)?;
+        let tendon_limits = compile_tendon_limits(&self.tendon_limits, &joints)?;
         let topology = Topology::new(
             bodies.len(),
             &joints,
@@ -386,6 +393,7 @@ impl ModelBuilder {
             &geoms,
             &contacts,
             &couplings,
+            &tendon_limits,
         )
         .map_err(|e| Error::model("joints", "graph", e))?;
         let actuators = self.compile_actuators(&joints, &bodies)?;
@@ -397,6 +405,7 @@ impl ModelBuilder {
             joints,
             actuators,
             couplings,
+            tendon_limits,
             geoms,
             contacts,
             nq,

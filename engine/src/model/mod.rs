@@ -10,7 +10,7 @@ pub use builder::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, ModelBuilder};
 pub use options::Options;
 pub(crate) use topology::Topology;
 pub(crate) use topology::body_node as topology_body_node;
-pub use transmission::{CouplingSpec, Transmission, TransmissionSpec};
+pub use transmission::{CouplingSpec, TendonLimitSpec, Transmission, TransmissionSpec};
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -18,6 +18,7 @@ use crate::contact::{Contact, Geom};
 use crate::joints::Joint;
 use crate::joints::coupling::Coupling;
 use crate::joints::geometry::Pose;
+use crate::joints::tendon::TendonLimit;
 
 /// A rigid body. Body 0 is the world.
 #[derive(Clone, Debug)]
@@ -91,6 +92,8 @@ pub struct Model {
     pub actuators: Vec<Actuator>,
     /// Joint couplings (MuJoCo's `equality/joint`), solved with the joints.
     pub couplings: Vec<Coupling>,
+    /// Fixed-tendon limits, solved as inequality constraints with the contacts.
+    pub tendon_limits: Vec<TendonLimit>,
     /// Collision geometries.
     pub geoms: Vec<Geom>,
     /// Contact candidates, decided at compile time.
@@ -151,7 +154,8 @@ impl Model {
         self.joints.iter().map(|j| j.limits.len()).sum()
     }
     /// Unknowns of one step per effect: `(name, count)` for body velocities, joint impulses, limit
-    /// variables and contact variables of each model. Effects a scene does not use count 0.
+    /// variables, contact variables of each model and tendon-limit variables. Effects a scene
+    /// does not use count 0.
     pub fn variable_counts(&self) -> Vec<(&'static str, usize)> {
         use crate::contact::ContactModel::*;
         let per = |m| {
@@ -168,6 +172,7 @@ impl Model {
             ("contact_impact", per(Impact)),
             ("contact_nonlinear_cone", per(Nonlinear)),
             ("contact_linear_cone", per(Linear)),
+            ("tendon_limit", 4 * self.tendon_limits.len()),
         ]
     }
     /// Identifier of the topology; a [`crate::State`] remembers it.

@@ -4,12 +4,15 @@
 //! Elimination order: post-order over the spanning tree in which each body hangs below its parent
 //! joint and each joint below its parent body, so every joint is eliminated after the subtree it
 //! carries (its pivot is then the negative-definite Schur complement `-K M⁻¹ Kᵀ`); loop-closing
-//! joints come last. Trees have no fill-in; loops fill in along their cycle only.
+//! joints come last, then joint couplings and tendon limits (nodes touching the bodies of
+//! several joints). Trees have no fill-in; loops fill in along their cycle only, couplings and
+//! tendon limits along the tree paths between their bodies.
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::contact::{Contact, Geom};
 use crate::joints::Joint;
 use crate::joints::coupling::Coupling;
+use crate::joints::tendon::TendonLimit;
 use crate::solver::graph_ldu::BlockPattern;
 
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
@@ -53,15 +56,21 @@ pub(crate) struct Topology {
     /// Per coupling, each distinct moving body it acts on with its (node row, body col) and
     /// (body row, node col) blocks.
     pub coupling_blocks: Vec<Vec<(usize, (usize, usize))>>,
+    /// Node of each tendon limit (`[γ_lo, s_lo, γ_hi, s_hi]`), eliminated last like couplings.
+    pub tendon_node: Vec<usize>,
+    /// Per tendon limit, each distinct moving body of its joints with its (node row, body col)
+    /// and (body row, node col) blocks.
+    pub tendon_blocks: Vec<Vec<(usize, (usize, usize))>>,
     /// Node of each contact candidate.
     pub contact_node: Vec<usize>,
     /// Blocks of each contact node for the bodies of geom a and geom b.
     pub contact_blocks: Vec<[Option<(usize, usize)>; 2]>,
     /// Bodies of each contact's geoms (a, b).
     pub contact_bodies: Vec<[usize; 2]>,
-    /// Whether the step has inequality variables (contacts or limits): interior-point path.
+    /// Whether the step has inequality variables (contacts, joint or tendon limits):
+    /// interior-point path.
     pub has_cones: bool,
-    /// Rows of bodies and joints (the inequality nodes follow them).
+    /// Rows of bodies, joints and couplings (the inequality nodes follow them).
     pub smooth_dim: usize,
 }
 
@@ -79,6 +88,7 @@ impl Topology {
         geoms: &[Geom],
         contacts: &[Contact],
         couplings: &[Coupling],
+        tendons: &[TendonLimit],
     ) -> Result<Self, String> {
         let nmoving = nbody - 1;
         let mut dims = vec![6; nmoving];
@@ -99,15 +109,8 @@ impl Topology {
         for c in couplings {
             coupling_node.push(dims.len());
             dims.push(1);
-            let mut bodies: Vec<usize> = Vec::new();
-            for (j, _) in std::iter::once(c.joint1).chain(c.joint2) {
-                for b in [joints[j].parent, joints[j].child] {
-                    if b > 0 && !bodies.contains(&b) {
-                        bodies.push(b);
-                    }
-                }
-            }
-            coupling_bodies.push(bodies);
+            let terms = std::iter::once(c.joint1).chain(c.joint2);
+            coupling_bodies.push(moving_bodies(joints, terms.map(|t| t.0)));
         }
         let mut leaves = Vec::new();
         let mut limit_node = vec![None; joints.len()];
@@ -129,12 +132,29 @@ impl Topology {
             let (o, q) = c.model.cones();
             cone_degree += o + q;
         }
+        // tendon limits: inequality nodes, but eliminated last (they touch several joints'
+        // bodies: as leaves they would fill in between all of them)
+        let mut tendon_node = Vec::with_capacity(tendons.len());
+        let mut tendon_bodies = Vec::with_capacity(tendons.len());
+        for t in tendons {
+            tendon_node.push(dims.len());
+            dims.push(4);
+            tendon_bodies.push(moving_bodies(joints, t.terms.iter().map(|t| t.0)));
+            cone_degree += 2;
+        }
         let mut edges = Vec::new();
         for (c, bodies) in coupling_bodies.iter().enumerate() {
             edges.extend(
                 bodies
                     .iter()
                     .filter_map(|&b| Some((coupling_node[c], body_node(b)?))),
+            );
+        }
+        for (t, bodies) in tendon_bodies.iter().enumerate() {
+            edges.extend(
+                bodies
+                    .iter()
+                    .filter_map(|&b| Some((tendon_node[t], body_node(b)?))),
             );
         }
         for (j, joint) in joints.iter().enumerate() {
@@ -158,8 +178,10 @@ impl Topology {
                 edges.push((p, c));
             }
         }
-        // inequality nodes are leaves: eliminated first
+        // contact and joint-limit nodes are leaves: eliminated first; couplings and tendon
+        // limits last
         let mut order = leaves.clone();
+        let late: Vec<usize> = coupling_node.iter().chain(&tendon_node).copied().collect();
         order.extend(elimination_order(
             nmoving,
             joints,
@@ -167,7 +189,7 @@ impl Topology {
             &joint_node,
             dims.len(),
             &leaves,
-            &coupling_node,
+            &late,
         ));
         let pattern = BlockPattern::new(&dims, &edges, &order)?;
         let blk = |i: usize, j: usize| -> Option<(usize, usize)> {
@@ -209,6 +231,16 @@ impl Topology {
                     .collect()
             })
             .collect();
+        let tendon_blocks = tendon_bodies
+            .iter()
+            .enumerate()
+            .map(|(t, bodies)| {
+                bodies
+                    .iter()
+                    .filter_map(|&b| Some((b, pair(tendon_node[t], b)?)))
+                    .collect()
+            })
+            .collect();
         let contact_blocks = contact_bodies
             .iter()
             .enumerate()
@@ -223,8 +255,11 @@ impl Topology {
             .collect();
         let fk_order = fk_order(joints, parent_joint);
         let smooth_dim = leaves
-            .first()
-            .map_or(pattern.total_dim(), |&n| pattern.offset(n));
+            .iter()
+            .chain(&tendon_node)
+            .map(|&n| pattern.offset(n))
+            .min()
+            .unwrap_or(pattern.total_dim());
         Ok(Topology {
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             fk_order,
@@ -240,12 +275,27 @@ impl Topology {
             limit_blocks,
             coupling_node,
             coupling_blocks,
+            tendon_node,
+            tendon_blocks,
             contact_node,
             contact_blocks,
             contact_bodies,
             smooth_dim,
         })
     }
+}
+
+/// Distinct moving bodies (parents and children) of the given joints.
+fn moving_bodies(joints: &[Joint], terms: impl Iterator<Item = usize>) -> Vec<usize> {
+    let mut bodies: Vec<usize> = Vec::new();
+    for j in terms {
+        for b in [joints[j].parent, joints[j].child] {
+            if b > 0 && !bodies.contains(&b) {
+                bodies.push(b);
+            }
+        }
+    }
+    bodies
 }
 
 /// Tree joints ordered so that a body's parent joint precedes the joints of its children.
@@ -276,7 +326,8 @@ fn fk_order(joints: &[Joint], parent_joint: &[Option<usize>]) -> Vec<usize> {
     order
 }
 
-/// Post-order of the node tree (children before parents), loop joints and couplings last.
+/// Post-order of the node tree (children before parents), loop joints and the `late` nodes
+/// (couplings, tendon limits) last.
 fn elimination_order(
     nmoving: usize,
     joints: &[Joint],
@@ -284,7 +335,7 @@ fn elimination_order(
     joint_node: &[Option<usize>],
     nnodes: usize,
     leaves: &[usize],
-    couplings: &[usize],
+    late: &[usize],
 ) -> Vec<usize> {
     // parent node of every node in the elimination tree (None = root)
     let mut up: Vec<Option<usize>> = vec![None; nnodes];
@@ -306,7 +357,7 @@ fn elimination_order(
     let mut children: Vec<Vec<usize>> = vec![Vec::new(); nnodes];
     let mut roots = Vec::new();
     for (n, parent) in up.iter().enumerate() {
-        if loops.contains(&n) || leaves.contains(&n) || couplings.contains(&n) {
+        if loops.contains(&n) || leaves.contains(&n) || late.contains(&n) {
             continue;
         }
         match *parent {
@@ -328,6 +379,6 @@ fn elimination_order(
         }
     }
     order.extend(loops);
-    order.extend(couplings);
+    order.extend(late);
     order
 }

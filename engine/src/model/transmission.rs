@@ -1,10 +1,12 @@
-//! Actuator transmissions beyond one joint dof (fixed tendons, sites) and joint couplings
-//! (MuJoCo's `equality/joint`): specs and their compilation against the compiled joints.
+//! Actuator transmissions beyond one joint dof (fixed tendons, sites), joint couplings
+//! (MuJoCo's `equality/joint`) and fixed-tendon limits: specs and their compilation against the
+//! compiled joints.
 use nalgebra::{Matrix3, Vector3};
 
 use super::Body;
 use crate::joints::Joint;
 use crate::joints::coupling::Coupling;
+use crate::joints::tendon::TendonLimit;
 use crate::math::quat;
 use crate::{Error, Result, ensure};
 
@@ -90,6 +92,17 @@ pub struct CouplingSpec {
     pub joint2: Option<(String, usize)>,
     /// Up to five polynomial coefficients.
     pub polycoef: Vec<f64>,
+}
+
+/// A fixed-tendon limit to add (MuJoCo's limited `<tendon><fixed>`): `lo ≤ Σ coef q ≤ hi`.
+#[derive(Clone, Debug)]
+pub struct TendonLimitSpec {
+    /// Unique name.
+    pub name: String,
+    /// Terms `(joint name, free dof, coef)` over hinge or slide coordinates.
+    pub terms: Vec<(String, usize, f64)>,
+    /// Range `(lo, hi)` of the tendon length (m or rad).
+    pub range: (f64, f64),
 }
 
 /// Index of a named joint's scalar (hinge or slide) free dof.
@@ -226,6 +239,48 @@ pub(super) fn compile_couplings(specs: &[CouplingSpec], joints: &[Joint]) -> Res
             joint2,
             polycoef,
             reference,
+        });
+    }
+    Ok(out)
+}
+
+pub(super) fn compile_tendon_limits(
+    specs: &[TendonLimitSpec],
+    joints: &[Joint],
+) -> Result<Vec<TendonLimit>> {
+    let mut out: Vec<TendonLimit> = Vec::with_capacity(specs.len());
+    for spec in specs {
+        let f = |field: &str| format!("tendon_limit[{}].{field}", spec.name);
+        ensure!(
+            !out.iter().any(|t| t.name == spec.name),
+            Error::model(f("name"), &spec.name, "duplicate tendon limit name")
+        );
+        let (lo, hi) = spec.range;
+        ensure!(
+            lo.is_finite() && hi.is_finite() && lo < hi,
+            Error::model(f("range"), spec.range, "need finite lower < upper")
+        );
+        ensure!(
+            spec.terms.iter().any(|t| t.2 != 0.0),
+            Error::model(
+                f("terms"),
+                &spec.terms,
+                "need at least one joint with a non-zero coef"
+            )
+        );
+        let mut terms = Vec::with_capacity(spec.terms.len());
+        for (name, dof, coef) in &spec.terms {
+            ensure!(
+                coef.is_finite(),
+                Error::model(f("terms.coef"), coef, "must be finite")
+            );
+            let (j, d) = scalar_dof(joints, name, *dof, &f("terms.joint"))?;
+            terms.push((j, d, *coef));
+        }
+        out.push(TendonLimit {
+            name: spec.name.clone(),
+            terms,
+            range: spec.range,
         });
     }
     Ok(out)

@@ -15,7 +15,7 @@ fn pose_of(state: &State, b: usize) -> Pose {
 }
 
 /// Coordinate `dof` of joint `ji` with its free-Jacobian row, at the given poses.
-fn coordinate(
+pub(super) fn coordinate(
     model: &Model,
     ji: usize,
     dof: usize,

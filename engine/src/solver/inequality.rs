@@ -1,4 +1,5 @@
-//! Inequality nodes of the step: contact candidates and joint limits (Dojo §IV-A, eq. 26).
+//! Inequality nodes of the step: contact candidates, joint limits and tendon limits (Dojo §IV-A,
+//! eq. 26; the tendon-limit rows are in [`super::tendon`]).
 //!
 //! Residual rows, Jacobian blocks, complementarity bookkeeping and the cone line search for the
 //! interior-point solve. Node-local variable layouts:
@@ -8,6 +9,7 @@
 //! nonlinear  [γ, s, ξ₁, ξ₂, ξ₃, η₁, η₂, η₃]
 //! linear     [γ, s, ψ, s_ψ, β₁..β₄, η₁..η₄]          (β along +t1, -t1, +t2, -t2)
 //! limit dof  [γ_lo, s_lo, γ_hi, s_hi]                   (4 per limited dof)
+//! tendon     [γ_lo, s_lo, γ_hi, s_hi]                   (4 per tendon limit)
 //! ```
 use nalgebra::{Matrix3, Vector3};
 
@@ -71,6 +73,11 @@ fn for_each_pair(
             }
         }
     }
+    for &n in &t.tendon_node {
+        for &(p, d, r) in &LIMIT_PAIRS {
+            f(t.pattern.offset(n), p, d, r, false);
+        }
+    }
 }
 
 fn v3(x: &[f64], i: usize) -> Vector3<f64> {
@@ -82,12 +89,12 @@ fn v3(x: &[f64], i: usize) -> Vector3<f64> {
 pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm: bool) {
     let t = &model.topology;
     let mut k = 0;
-    let nodes = t.contact_node.iter().map(|&n| (n, t.pattern.dim(n))).chain(
-        t.limit_node
-            .iter()
-            .flatten()
-            .map(|&n| (n, t.pattern.dim(n))),
-    );
+    let nodes = t
+        .contact_node
+        .iter()
+        .chain(t.limit_node.iter().flatten())
+        .chain(&t.tendon_node)
+        .map(|&n| (n, t.pattern.dim(n)));
     for (n, dim) in nodes {
         let o = t.pattern.offset(n);
         let prev = &state.ineq_vars[k..k + dim];
@@ -353,6 +360,7 @@ pub(crate) fn evaluate(
             }
         }
     }
+    super::tendon::add_rows(model, ws, w, residual, kappa);
     violations(model, &ws.active, w, residual, kappa)
 }
 
@@ -485,6 +493,9 @@ fn violations(
             }
         }
     }
+    for &n in &t.tendon_node {
+        eq(t.pattern.offset(n), &[0, 2], residual, &mut rvio);
+    }
     (rvio, kvio)
 }
 
@@ -558,10 +569,11 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
         }
     }
     assemble_limits(model, ws, w, h);
+    super::tendon::assemble(model, ws, w, h);
 }
 
 /// `∂(row · δx⁺)/∂w` for one body: `[h row_p, row_φ · ∂φ/∂ω]`.
-fn chain_row(row: &[f64], h: f64, dphi: &Matrix3<f64>) -> [f64; 6] {
+pub(super) fn chain_row(row: &[f64], h: f64, dphi: &Matrix3<f64>) -> [f64; 6] {
     let mut out = [0.0; 6];
     for i in 0..3 {
         out[i] = h * row[i];
@@ -791,7 +803,7 @@ pub(crate) fn store(model: &Model, state: &mut State, ws: &Workspace) {
         }
         k += dim;
     }
-    for &n in t.limit_node.iter().flatten() {
+    for &n in t.limit_node.iter().flatten().chain(&t.tendon_node) {
         let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
         state.ineq_vars[k..k + dim].copy_from_slice(&ws.w[o..o + dim]);
         k += dim;

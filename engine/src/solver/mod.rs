@@ -8,3 +8,4 @@ pub mod graph_ldu;
 pub(crate) mod inequality;
 pub(crate) mod ipm;
 pub(crate) mod newton;
+pub(crate) mod tendon;

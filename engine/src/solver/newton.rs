@@ -799,6 +799,102 @@ mod tests {
         check_newton_matrix(&model, 0.3);
     }
 
+    /// A slide–hinge–slide chain with a tendon limit over joints `terms` (name, coef) and an
+    /// optional limit `range` on the hinge.
+    fn tendon_model(terms: &[(&str, f64)], range: (f64, f64), hinge_limit: bool) -> Model {
+        use crate::model::TendonLimitSpec;
+        let mut b = ModelBuilder::new().timestep(0.02);
+        let kinds = [
+            JointKind::Prismatic,
+            JointKind::Revolute,
+            JointKind::Prismatic,
+        ];
+        for (i, kind) in kinds.iter().enumerate() {
+            let name = format!("b{i}");
+            b = b.body(
+                BodySpec::new(&name, 1.0 + 0.3 * i as f64, [0.1, 0.2, 0.15]).pos([
+                    0.0,
+                    0.0,
+                    -0.5 - i as f64,
+                ]),
+            );
+            let parent = if i == 0 {
+                "world".into()
+            } else {
+                format!("b{}", i - 1)
+            };
+            let z = if i == 0 { 0.0 } else { -0.5 };
+            let mut j = JointSpec::new(&format!("j{i}"), *kind, &parent, &name)
+                .axis([0.3, 1.0, 0.2 * i as f64])
+                .anchors([0.0, 0.0, z], [0.0, 0.0, 0.5]);
+            if i == 1 && hinge_limit {
+                j.range = Some(vec![range]);
+            }
+            b = b.joint(j);
+        }
+        b.add_tendon_limit(TendonLimitSpec {
+            name: "t".into(),
+            terms: terms.iter().map(|&(j, c)| (j.to_string(), 0, c)).collect(),
+            range,
+        });
+        b.compile().unwrap()
+    }
+
+    #[test]
+    fn newton_matrix_with_a_tendon_limit_matches_finite_differences() {
+        // slide coordinates: their free-Jacobian rows are exact derivatives everywhere (a
+        // hinge angle's are exact on the constraint manifold only, as for joint limits)
+        let model = tendon_model(&[("j0", 0.5), ("j2", -2.0)], (-0.2, 0.3), false);
+        assert!(model.topology.has_cones);
+        assert_eq!(model.topology.tendon_blocks[0].len(), 3);
+        check_newton_matrix(&model, 0.3);
+    }
+
+    #[test]
+    fn a_one_joint_tendon_limit_has_the_rows_of_the_joint_limit() {
+        let model = tendon_model(&[("j1", 1.0)], (-0.4, 0.6), true);
+        let mut state = crate::State::reference(&model);
+        crate::set_minimal(&model, &mut state, &[0.1, 0.5, -0.2], &[0.3, -2.0, 0.7]).unwrap();
+        let mut ws = Workspace::new(&model);
+        prepare(&model, &state, &mut ws, &[], &AppliedForces::default());
+        let t = &model.topology;
+        let (lim, ten) = (
+            t.pattern.offset(t.limit_node[1].unwrap()),
+            t.pattern.offset(t.tendon_node[0]),
+        );
+        for (i, w) in ws.w.iter_mut().enumerate() {
+            *w += 0.3 * ((i as f64) * 1.3).cos();
+        }
+        for i in 0..4 {
+            ws.w[lim + i] = 0.5 + 0.2 * i as f64;
+            ws.w[ten + i] = ws.w[lim + i];
+        }
+        evaluate(&model, &state, &mut ws, false, 0.1);
+        assemble(&model, &mut ws);
+        let n = ws.w.len();
+        let col = |j: usize, ws: &Workspace| {
+            let mut x = vec![0.0; n];
+            x[j] = 1.0;
+            let mut ax = vec![0.0; n];
+            ws.matrix.matvec(&t.pattern, &x, &mut ax);
+            ax
+        };
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-14 * (1.0 + a.abs());
+        for i in 0..4 {
+            assert!(close(ws.residual[lim + i], ws.residual[ten + i]), "row {i}");
+            let (cl, ct) = (col(lim + i, &ws), col(ten + i, &ws));
+            for r in 0..t.smooth_dim {
+                assert!(close(cl[r], ct[r]), "body row {r}, col {i}");
+            }
+        }
+        for j in 0..t.smooth_dim {
+            let c = col(j, &ws);
+            for i in 0..4 {
+                assert!(close(c[lim + i], c[ten + i]), "row {i}, body col {j}");
+            }
+        }
+    }
+
     #[test]
     fn newton_matrix_matches_finite_differences_of_the_residual() {
         check_newton_matrix(&model(), 0.0);
