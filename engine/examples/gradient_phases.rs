@@ -155,7 +155,11 @@ fn main() {
         model.nv,
         model.nu(),
         model.ncontact(),
-        if model.options.central_warm_start { "hard" } else { "neutral" }
+        if model.options.central_warm_start {
+            "hard"
+        } else {
+            "neutral"
+        }
     );
     let n = steps as f64;
     println!(

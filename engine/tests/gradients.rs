@@ -562,7 +562,11 @@ fn central_starts_agree(m: &Model, s: &State, u: &[f64], kappa: f64) -> (f64, us
                 .unwrap();
         let c = lin.central_report().unwrap();
         assert!(!lin.central_fallback() || warm);
-        (lin.jacobians(&m).unwrap(), c.iterations, lin.central_fallback())
+        (
+            lin.jacobians(&m).unwrap(),
+            c.iterations,
+            lin.central_fallback(),
+        )
     };
     let ((jw, iw, fallback), (jn, inn, _)) = (jac(true), jac(false));
     let e = rel_err(&jw.a, &jn.a).max(rel_err(&jw.b, &jn.b));

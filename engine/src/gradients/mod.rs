@@ -210,12 +210,15 @@ pub fn step_smoothed(
     let w = ws.w.clone();
     let prev = state.clone();
     next_state_into(model, &prev, &w, state);
-    Ok(central.map_or(StepReport {
-        status: SolveStatus::Converged,
-        iterations: 0,
-        residual: 0.0,
-        complementarity: 0.0,
-    }, |c| c.report))
+    Ok(central.map_or(
+        StepReport {
+            status: SolveStatus::Converged,
+            iterations: 0,
+            residual: 0.0,
+            complementarity: 0.0,
+        },
+        |c| c.report,
+    ))
 }
 
 /// A solved step: the hard next state, the solver reports and the workspace holding the
@@ -275,7 +278,10 @@ fn move_to_central(
 ) -> Result<Option<Central>> {
     match kappa {
         Some(k) if model.topology.has_cones => {
-            let warm = model.options.central_warm_start.then_some(model.options.max_iter);
+            let warm = model
+                .options
+                .central_warm_start
+                .then_some(model.options.max_iter);
             let c = solve_central(model, state, ws, k, warm)?;
             ensure!(
                 c.report.status.is_success(),
@@ -679,5 +685,71 @@ impl Linearization {
             }
         }
         Ok(out.iter().copied().collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{BodySpec, GeomSpec, JointKind, JointSpec, ModelBuilder, Shape};
+
+    /// A 1 kg box (10 cm) sliding at 1 m/s on a floor with μ = 0.5, settled onto it.
+    fn sliding_box() -> (Model, State) {
+        let half = nalgebra::Vector3::new(0.05, 0.05, 0.05);
+        let m = ModelBuilder::new()
+            .timestep(0.01)
+            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.5))
+            .body(BodySpec::new("box", 1.0, [1.0 / 600.0; 3]).pos([0.0, 0.0, 0.05]))
+            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
+            .geom(GeomSpec::new("box", "box", Shape::Box { half_extents: half }).friction(0.5))
+            .compile()
+            .unwrap();
+        let mut s = State::reference(&m);
+        let mut ws = Workspace::new(&m);
+        for _ in 0..20 {
+            crate::step(&m, &mut s, &mut ws, &[]).unwrap();
+        }
+        let q = crate::qpos(&m, &s);
+        crate::set_minimal(&m, &mut s, &q, &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]).unwrap();
+        (m, s)
+    }
+
+    #[test]
+    fn a_failed_central_solve_from_the_hard_solution_falls_back_to_the_neutral_start() {
+        let (m, s) = sliding_box();
+        let kappa = 1e-4;
+        let mut ws = Workspace::new(&m);
+        newton::prepare(&m, &s, &mut ws, &[], &AppliedForces::default());
+        assert!(newton::solve(&m, &s, &mut ws).status.is_success());
+        let (hard_w, hard_active) = (ws.w.clone(), ws.active.clone());
+        let from_hard = |ws: &mut Workspace, warm_budget| {
+            ws.w.copy_from_slice(&hard_w);
+            ws.active.copy_from_slice(&hard_active);
+            let c = solve_central(&m, &s, ws, kappa, warm_budget).unwrap();
+            assert_eq!(c.report.status, SolveStatus::Converged, "{c:?}");
+            (c, ws.w.clone())
+        };
+        // the start from the hard solution converges on its own in a few iterations
+        let (warm, w_warm) = from_hard(&mut ws, Some(m.options.max_iter));
+        assert!(
+            !warm.fallback && (2..=10).contains(&warm.report.iterations),
+            "{warm:?}"
+        );
+        // the former path: the neutral start only
+        let (neutral, w_neutral) = from_hard(&mut ws, None);
+        assert!(neutral.report.iterations > warm.report.iterations);
+        // one iteration cannot reach the κ path: the warm solve fails and the neutral start
+        // runs from the hard velocities, exactly the former path
+        let (forced, w_forced) = from_hard(&mut ws, Some(1));
+        assert!(forced.fallback);
+        assert_eq!(forced.report.iterations, 1 + neutral.report.iterations);
+        assert_eq!(w_forced, w_neutral);
+        // one central-path point, whichever start found it
+        let scale = w_warm.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+        let diff = w_warm
+            .iter()
+            .zip(&w_forced)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(diff < 1e-8 * scale, "solutions differ by {diff:e}");
     }
 }

@@ -127,10 +127,7 @@ fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepR
         ws.delta.copy_from_slice(&ws.residual);
         add_mehrotra_correction(model, &ws.active, &ws.nt, &ws.delta_aff, &mut ws.delta);
         ipm::solve_negated(ws, p);
-        let worst = Violation {
-            r: centred,
-            k: 0.0,
-        };
+        let worst = Violation { r: centred, k: 0.0 };
         let mut taus = ipm::fractions_to_boundary(model, worst);
         if centred > NEAR {
             taus = (taus.0.min(TAU_FAR), taus.1.min(TAU_FAR));
@@ -197,12 +194,7 @@ pub(crate) fn centre(model: &Model, state: &State, ws: &mut Workspace, kappa: f6
             ContactModel::Impact => {}
             ContactModel::Nonlinear => {
                 let slip = [x[6] - r[6], x[7] - r[7]];
-                let (xi, eta) = friction_pair(
-                    contact.friction * gamma,
-                    [x[3], x[4]],
-                    slip,
-                    kappa,
-                );
+                let (xi, eta) = friction_pair(contact.friction * gamma, [x[3], x[4]], slip, kappa);
                 x[2..5].copy_from_slice(xi.as_slice());
                 x[5..8].copy_from_slice(eta.as_slice());
             }
@@ -239,7 +231,11 @@ fn orthant_pair(b: f64, c: f64, kappa: f64) -> (f64, f64) {
         return (r, r);
     }
     let (b, c) = (b.max(0.0), c.max(0.0));
-    if b >= c { (b, kappa / b) } else { (kappa / c, c) }
+    if b >= c {
+        (b, kappa / b)
+    } else {
+        (kappa / c, c)
+    }
 }
 
 /// A friction-cone pair `(ξ, η)` on the κ central path with `ξ₁ = a = μγ`, given the step's
@@ -298,7 +294,10 @@ mod tests {
         for (a, f, v) in cases {
             let (xi, eta) = friction_pair(a, f, v, kappa);
             let prod = soc_product(&xi, &eta);
-            assert!((prod - Vector3::new(kappa, 0.0, 0.0)).norm() < 1e-12, "{prod}");
+            assert!(
+                (prod - Vector3::new(kappa, 0.0, 0.0)).norm() < 1e-12,
+                "{prod}"
+            );
             assert!(soc_det(&xi) > 0.0 && soc_det(&eta) > 0.0);
             assert_eq!(xi[0], a);
             // friction and slip are at least their hard values (up to the rim margin)
@@ -321,4 +320,3 @@ mod tests {
         assert_eq!(orthant_pair(f64::NAN, 0.1, kappa), (1e-2, 1e-2));
     }
 }
-
