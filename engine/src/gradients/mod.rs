@@ -14,10 +14,12 @@
 //!
 //! **κ-smoothing.** With `kappa_grad = Some(κ)` the gradient point is the *central-path point*
 //! at κ, the solution of `R(w; κ) = 0` with every complementarity pair held at `b ∘ c = κ e`:
-//! after the hard solve (to `kappa_tol`), `solver::central::solve` restarts the
-//! inequality variables at the neutral point and runs the predictor-corrector with centring
-//! floored at κ, with an iteration budget of at least `CENTRAL_MAX_ITER` = 200 (from the
-//! neutral point it needs more iterations than a warm-started step). The derivatives are those
+//! after the hard solve (to `kappa_tol`), `solver::central::solve` moves every complementarity
+//! pair of the hard solution to product κ and runs Newton's method at κ from there (a few
+//! iterations); if that fails, it restarts the inequality variables at the neutral point and
+//! runs the predictor-corrector with centring floored at κ, with an iteration budget of at
+//! least `CENTRAL_MAX_ITER` = 200 (`Options::central_warm_start = false`: that path alone,
+//! as before). The derivatives are those
 //! of that smoothed step map (contact forces act at a distance ~κ/γ, friction is smoothed),
 //! while the returned next state is still the hard one. `None` differentiates the hard solution itself (exact but
 //! discontinuous through contact changes, and ill-conditioned at grazing contact).
