@@ -295,3 +295,31 @@ def test_batched_kernels_reject_mismatched_batches_by_name():
     with pytest.raises(ukemi.ShapeError, match="adj"):
         ukemi._ukemi._flat_rollout_vjp(m, np.zeros((1, n)), np.zeros((1, 4, m.nu)),
                                        np.zeros((1, 3, n)), None)
+
+
+@pytest.mark.parametrize("name", ["hopper", "humanoid"])
+def test_smoothed_jacobians_do_not_depend_on_the_central_path_start(name):
+    """The central-path point at kappa_grad is unique: starting its solve from the hard solution
+    (the default) or from the neutral point (central_warm_start=False) gives the same A and B on
+    gymnasium's hopper and humanoid at dt = 0.01 (on the floor, random controls), and the start
+    from the hard solution needs fewer iterations. Tolerance 5e-8 relative: with both centred
+    residuals at 1e-15 the humanoid's A, B still differ by up to 1.7e-8 (the partials are
+    central differences, ~1e-9, through a Newton matrix conditioned by kappa)."""
+    with pytest.warns(UserWarning):
+        m = ukemi.Model.from_xml_path(ukemi.gymnasium_asset_path(name))
+    m = m.with_options(timestep=0.01, rtol=1e-12, max_iter=100)
+    rng = np.random.default_rng(5)
+    lo, hi = m.actuator_ctrlrange[:, 0], m.actuator_ctrlrange[:, 1]
+    s = m.make_state()
+    for k in range(12):
+        u = lo + (hi - lo) * rng.random(m.nu)
+        if k % 4 == 3:
+            for kappa in (1e-4, 3e-4, 1e-6):
+                jw = ukemi.step_jacobians(m, s, u, wrt=("state", "ctrl"), kappa_grad=kappa)
+                neutral = m.with_options(central_warm_start=False)
+                jn = ukemi.step_jacobians(neutral, s, u, wrt=("state", "ctrl"), kappa_grad=kappa)
+                for x, y in ((jw.A, jn.A), (jw.B, jn.B)):
+                    scale = max(1.0, np.abs(y).max())
+                    assert np.abs(x - y).max() / scale < 5e-8, (name, k, kappa)
+                assert jw.central_info.iterations < jn.central_info.iterations, (name, k, kappa)
+        s, _ = ukemi.step(m, s, u)

@@ -480,7 +480,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -498,6 +498,7 @@ impl PyModel {
         kappa_grad: Option<f64>,
         activation_margin: Option<f64>,
         nt_scaling: Option<bool>,
+        central_warm_start: Option<bool>,
     ) -> PyResult<PyModel> {
         guard(|| {
             let mut o = self.inner.options.clone();
@@ -513,6 +514,7 @@ impl PyModel {
             o.undercut = undercut.unwrap_or(o.undercut);
             o.warm_start = warm_start.unwrap_or(o.warm_start);
             o.nt_scaling = nt_scaling.unwrap_or(o.nt_scaling);
+            o.central_warm_start = central_warm_start.unwrap_or(o.central_warm_start);
             // activation_margin = inf keeps every contact candidate active
             o.activation_margin = activation_margin.unwrap_or(o.activation_margin);
             // kappa_grad = 0 selects the exact (unsmoothed) derivative

@@ -1,11 +1,14 @@
 //! Per-phase timing of step Jacobians on an MJCF model (Table V workload: dt = 0.01, random
 //! controls in the control range, full minimal-coordinate A and B every step):
-//! `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml [STEPS] [KAPPA_GRAD|none] [coloured]`
-//! (`coloured` skips the column-by-column reference).
+//! `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml [STEPS] [KAPPA_GRAD|none] [coloured] [neutral]`
+//! (`coloured` skips the column-by-column reference; `neutral` starts the central-path solve
+//! from the neutral point, `Options::central_warm_start = false`).
 //! Linearises every step twice, with the coloured partials and with the column-by-column
 //! reference, and prints for each the mean milliseconds per step of the solve, the
 //! central-path move, the factorisation, the partial derivatives and the back-substitutions,
-//! the residual evaluations, and the largest difference between the two Jacobians.
+//! the residual evaluations, and the largest difference between the two Jacobians; with
+//! `KAPPA_GRAD`, the central-path solve's iterations and how often it fell back to the neutral
+//! start.
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{
     Coordinates, Linearization, PartialsMethod, PhaseTimes, State, Workspace, Wrt, mjcf,
@@ -17,6 +20,8 @@ struct Sum {
     t: PhaseTimes,
     evaluations: usize,
     n: usize,
+    central_iterations: Vec<usize>,
+    fallbacks: usize,
 }
 
 impl Sum {
@@ -29,6 +34,10 @@ impl Sum {
         self.t.backsub += t.backsub;
         self.evaluations += lin.residual_evaluations();
         self.n += 1;
+        if let Some(c) = lin.central_report() {
+            self.central_iterations.push(c.iterations);
+            self.fallbacks += usize::from(lin.central_fallback());
+        }
     }
     fn print(&self, name: &str) {
         let ms = |x: f64| 1e3 * x / self.n.max(1) as f64;
@@ -41,6 +50,16 @@ impl Sum {
             ms(self.t.backsub),
             self.evaluations as f64 / self.n.max(1) as f64
         );
+        let its = &self.central_iterations;
+        if !its.is_empty() {
+            println!(
+                "  {:16} central iterations mean {:.1} max {}, fallbacks to the neutral start {}",
+                "",
+                its.iter().sum::<usize>() as f64 / its.len() as f64,
+                its.iter().max().unwrap_or(&0),
+                self.fallbacks
+            );
+        }
     }
 }
 
@@ -49,10 +68,12 @@ fn main() {
     let path = args.get(1).expect("model path");
     let steps: usize = args.get(2).map_or(20, |s| s.parse().unwrap());
     let kappa: Option<f64> = args.get(3).and_then(|s| s.parse().ok());
-    let with_reference = args.get(4).is_none_or(|s| s != "coloured");
+    let flag = |f: &str| args.iter().skip(4).any(|s| s == f);
+    let with_reference = !flag("coloured");
     let model = mjcf::load_path(std::path::Path::new(path)).unwrap().model;
     let mut opts = model.options.clone();
     opts.timestep = 0.01;
+    opts.central_warm_start = !flag("neutral");
     let model = model.with_options(opts).unwrap();
     let mut state = State::reference(&model);
     let (qpos, qvel) = match model.keyframes.first() {
@@ -70,7 +91,7 @@ fn main() {
         (seed >> 11) as f64 / (1u64 << 53) as f64
     };
     let (mut coloured, mut reference) = (Sum::default(), Sum::default());
-    let (mut failed, mut worst) = (0, 0.0f64);
+    let (mut failed, mut central_failed, mut worst) = (0, 0, 0.0f64);
     let (mut plain, mut with_jac) = (0.0, 0.0);
     for _ in 0..steps {
         let ctrl: Vec<f64> = model
@@ -121,6 +142,7 @@ fn main() {
             }
             Err(e) => {
                 failed += 1;
+                central_failed += usize::from(e.to_string().contains("central-path"));
                 if failed <= 3 {
                     println!("failed: {e}");
                 }
@@ -129,10 +151,15 @@ fn main() {
         }
     }
     println!(
-        "{path}: nv {} nu {} ncontact {}, {steps} steps, kappa_grad {kappa:?}, {failed} failed",
+        "{path}: nv {} nu {} ncontact {}, {steps} steps, kappa_grad {kappa:?}, central start {}, {failed} failed ({central_failed} in the central-path solve)",
         model.nv,
         model.nu(),
-        model.ncontact()
+        model.ncontact(),
+        if model.options.central_warm_start {
+            "hard"
+        } else {
+            "neutral"
+        }
     );
     let n = steps as f64;
     println!(

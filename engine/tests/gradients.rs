@@ -609,3 +609,100 @@ fn coloured_partials_equal_column_by_column_with_contacts() {
         }
     }
 }
+
+/// Jacobians at `kappa_grad = kappa` with the central-path solve started from the hard solution
+/// (`central_warm_start`, the default) and from the neutral point: the smoothed step's solution
+/// is unique, so they must agree to the solves' tolerance. Returns the relative difference
+/// and the central iterations (hard start, neutral start).
+fn central_starts_agree(m: &Model, s: &State, u: &[f64], kappa: f64) -> (f64, usize, usize) {
+    let jac = |warm: bool| {
+        let mut o = m.options.clone();
+        o.central_warm_start = warm;
+        let m = m.with_options(o).unwrap();
+        let mut lin =
+            Linearization::new(&m, s, u, Coordinates::Minimal, Wrt::STATE_CTRL, Some(kappa))
+                .unwrap();
+        let c = lin.central_report().unwrap();
+        assert!(!lin.central_fallback() || warm);
+        (
+            lin.jacobians(&m).unwrap(),
+            c.iterations,
+            lin.central_fallback(),
+        )
+    };
+    let ((jw, iw, fallback), (jn, inn, _)) = (jac(true), jac(false));
+    let e = rel_err(&jw.a, &jn.a).max(rel_err(&jw.b, &jn.b));
+    eprintln!(
+        "kappa {kappa:e}: rel diff {e:.1e}, central iterations {iw} from the hard solution \
+         (fallback {fallback}), {inn} from the neutral point"
+    );
+    assert!(e < 1e-8, "kappa {kappa:e}: Jacobians differ by {e:e}");
+    (e, iw, inn)
+}
+
+const KAPPAS: [f64; 3] = [1e-4, 3e-4, 1e-6];
+
+#[test]
+fn central_start_from_the_hard_solution_gives_the_same_jacobians_box_push() {
+    // Dojo's Fig. 4 box: resting, pushed below the friction threshold (μ m g = 4.9 N), sliding
+    let b = contact_scenes::floor(ModelBuilder::new().timestep(0.01), 0.5);
+    let half = nalgebra::Vector3::new(0.05, 0.05, 0.05);
+    let b = contact_scenes::free_body(
+        b,
+        "box",
+        1.0,
+        Shape::Box { half_extents: half },
+        [0.0, 0.0, 0.05],
+        [1.0, 0.0, 0.0, 0.0],
+        0.5,
+        ContactModel::Nonlinear,
+    );
+    let mut push = ActuatorSpec::motor("push", "box_free", 0, 1.0);
+    push.ctrlrange = None;
+    let m = tight(b.actuator(push).compile().unwrap());
+    let s = settled(&m, &[0.0; 6]);
+    for force in [0.0, 3.0, 10.0] {
+        for kappa in KAPPAS {
+            central_starts_agree(&m, &s, &[force], kappa);
+        }
+    }
+}
+
+/// A shared robot model at dt = 0.01, a few steps of varied controls from its first keyframe
+/// (`None` when the file is absent).
+fn shared_robot(name: &str) -> Option<(Model, State)> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(format!("../../shared/models/{name}.xml"));
+    if !path.exists() {
+        eprintln!("skipped: {} not found", path.display());
+        return None;
+    }
+    let m = ukemi_engine::mjcf::load_path(&path).unwrap().model;
+    let mut o = m.options.clone();
+    o.timestep = 0.01;
+    let m = m.with_options(o).unwrap();
+    let mut s = State::reference(&m);
+    let (qpos, qvel) = match m.keyframes.first() {
+        Some(k) => (k.qpos.clone(), k.qvel.clone()),
+        None => (m.qpos0.clone(), vec![0.0; m.nv]),
+    };
+    ukemi_engine::set_minimal(&m, &mut s, &qpos, &qvel).unwrap();
+    let mut ws = Workspace::new(&m);
+    for k in 0..3 {
+        step(&m, &mut s, &mut ws, &some_ctrl(&m, k)).unwrap();
+    }
+    Some((m, s))
+}
+
+#[test]
+fn central_start_from_the_hard_solution_gives_the_same_jacobians_humanoid_and_panda() {
+    for name in ["humanoid", "panda"] {
+        let Some((m, s)) = shared_robot(name) else {
+            continue;
+        };
+        eprintln!("{name}:");
+        for kappa in KAPPAS {
+            central_starts_agree(&m, &s, &some_ctrl(&m, 3), kappa);
+        }
+    }
+}

@@ -14,10 +14,12 @@
 //!
 //! **κ-smoothing.** With `kappa_grad = Some(κ)` the gradient point is the *central-path point*
 //! at κ, the solution of `R(w; κ) = 0` with every complementarity pair held at `b ∘ c = κ e`:
-//! after the hard solve (to `kappa_tol`), `solver::ipm::solve_central` restarts the
-//! inequality variables at the neutral point and runs the predictor-corrector with centring
-//! floored at κ, with an iteration budget of at least `CENTRAL_MAX_ITER` = 200 (from the
-//! neutral point it needs more iterations than a warm-started step). The derivatives are those
+//! after the hard solve (to `kappa_tol`), `solver::central::solve` moves every complementarity
+//! pair of the hard solution to product κ and runs Newton's method at κ from there (a few
+//! iterations); if that fails, it restarts the inequality variables at the neutral point and
+//! runs the predictor-corrector with centring floored at κ, with an iteration budget of at
+//! least `CENTRAL_MAX_ITER` = 200 (`Options::central_warm_start = false`: that path alone,
+//! as before). The derivatives are those
 //! of that smoothed step map (contact forces act at a distance ~κ/γ, friction is smoothed),
 //! while the returned next state is still the hard one. `None` differentiates the hard solution itself (exact but
 //! discontinuous through contact changes, and ill-conditioned at grazing contact).
@@ -46,7 +48,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::math::quat;
 use crate::model::Model;
 use crate::model::topology_body_node as body_node;
-use crate::solver::{ipm, newton};
+use crate::solver::{central, newton};
 use crate::state::{SolveStatus, State, StepReport, Workspace};
 use crate::step::{AppliedForces, validate_inputs};
 use crate::{Error, Result, ensure};
@@ -132,7 +134,7 @@ pub struct Linearization {
     coords: Coordinates,
     next: State,
     report: StepReport,
-    central: Option<StepReport>,
+    central: Option<Central>,
     ws: Workspace,
     /// Gradient point (the solution, or its central-path point at `kappa_grad`).
     w: Vec<f64>,
@@ -181,7 +183,7 @@ fn solve_for_gradient(
     ctrl: &[f64],
     kappa: Option<f64>,
     times: &mut PhaseTimes,
-) -> Result<(State, StepReport, Option<StepReport>, Workspace)> {
+) -> Result<(State, StepReport, Option<Central>, Workspace)> {
     let t0 = Instant::now();
     let mut ws = Workspace::new(model);
     validate_inputs(model, state, &ws, ctrl, &AppliedForces::default())?;
@@ -210,12 +212,15 @@ pub fn step_smoothed(
     let w = ws.w.clone();
     let prev = state.clone();
     next_state_into(model, &prev, &w, state);
-    Ok(central.unwrap_or(StepReport {
-        status: SolveStatus::Converged,
-        iterations: 0,
-        residual: 0.0,
-        complementarity: 0.0,
-    }))
+    Ok(central.map_or(
+        StepReport {
+            status: SolveStatus::Converged,
+            iterations: 0,
+            residual: 0.0,
+            complementarity: 0.0,
+        },
+        |c| c.report,
+    ))
 }
 
 /// A solved step: the hard next state, the solver reports and the workspace holding the
@@ -223,7 +228,7 @@ pub fn step_smoothed(
 struct Solved {
     next: State,
     report: StepReport,
-    central: Option<StepReport>,
+    central: Option<Central>,
     ws: Workspace,
 }
 
@@ -257,6 +262,14 @@ fn check_kappa(kappa_grad: Option<f64>) -> Result<()> {
     Ok(())
 }
 
+/// The move of a solved workspace to the central path: the solver report (iterations of every
+/// attempt) and whether the neutral-start fallback ran.
+#[derive(Clone, Copy, Debug)]
+struct Central {
+    report: StepReport,
+    fallback: bool,
+}
+
 /// Move a solved workspace onto the central path at `kappa` (when given and the model has
 /// inequality constraints).
 fn move_to_central(
@@ -264,36 +277,88 @@ fn move_to_central(
     state: &State,
     ws: &mut Workspace,
     kappa: Option<f64>,
-) -> Result<Option<StepReport>> {
+) -> Result<Option<Central>> {
     match kappa {
         Some(k) if model.topology.has_cones => {
-            // NOTE: the central solve starts from the neutral point (γ = s = 1 on every
-            // candidate), far from the step's impulse scale; with hundreds of candidates it
-            // needs more iterations than a warm-started hard step (panda, 835 candidates:
-            // 36-56), so it gets its own budget
-            let mut opts = model.options.clone();
-            opts.max_iter = opts.max_iter.max(CENTRAL_MAX_ITER);
-            let central_model;
-            let m = if opts.max_iter == model.options.max_iter {
-                model
-            } else {
-                central_model = model.with_options(opts)?;
-                &central_model
-            };
-            let mut c = ipm::solve_central(m, state, ws, k);
-            // the solve checks convergence before each iteration: a last iterate that meets
-            // the tolerance is converged
-            if c.status == SolveStatus::MaxIterations && c.residual < model.options.rtol {
-                c.status = SolveStatus::Converged;
-            }
+            let warm = model
+                .options
+                .central_warm_start
+                .then_some(model.options.max_iter);
+            let c = solve_central(model, state, ws, k, warm)?;
             ensure!(
-                c.status.is_success(),
-                not_converged(&format!("central-path point at kappa_grad = {k:e}"), c)
+                c.report.status.is_success(),
+                not_converged(
+                    &format!("central-path point at kappa_grad = {k:e}"),
+                    c.report
+                )
             );
             Ok(Some(c))
         }
         _ => Ok(None),
     }
+}
+
+/// The central-path solve at `k` of the solved step in `ws`: with `warm_budget = Some(n)` first
+/// from the hard solution moved onto the central path (`central::Start::Hard`, at most `n`
+/// iterations), then, if that fails, from the neutral point and the hard velocities.
+///
+/// NOTE: from the neutral point (γ = s = 1 on every candidate, far from the step's impulse
+/// scale) the solve needs more iterations than a warm-started hard step (panda, 835
+/// candidates: 36-56), so the fallback gets a budget of at least `CENTRAL_MAX_ITER`.
+fn solve_central(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    k: f64,
+    warm_budget: Option<usize>,
+) -> Result<Central> {
+    let mut iterations = 0;
+    if let Some(budget) = warm_budget {
+        let hard = ws.w.clone();
+        let c = solve_central_from(model, state, ws, k, central::Start::Hard, budget)?;
+        if c.status.is_success() {
+            return Ok(Central {
+                report: c,
+                fallback: false,
+            });
+        }
+        iterations = c.iterations;
+        ws.w.copy_from_slice(&hard);
+    }
+    let budget = model.options.max_iter.max(CENTRAL_MAX_ITER);
+    let mut c = solve_central_from(model, state, ws, k, central::Start::Neutral, budget)?;
+    c.iterations += iterations;
+    Ok(Central {
+        report: c,
+        fallback: warm_budget.is_some(),
+    })
+}
+
+/// One central-path solve from `start` with an iteration budget of `max_iter`.
+fn solve_central_from(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    k: f64,
+    start: central::Start,
+    max_iter: usize,
+) -> Result<StepReport> {
+    let budgeted;
+    let m = if max_iter == model.options.max_iter {
+        model
+    } else {
+        let mut opts = model.options.clone();
+        opts.max_iter = max_iter;
+        budgeted = model.with_options(opts)?;
+        &budgeted
+    };
+    let mut c = central::solve(m, state, ws, k, start);
+    // the solve checks convergence before each iteration: a last iterate that meets the
+    // tolerance is converged
+    if c.status == SolveStatus::MaxIterations && c.residual < model.options.rtol {
+        c.status = SolveStatus::Converged;
+    }
+    Ok(c)
 }
 
 impl Linearization {
@@ -470,7 +535,12 @@ impl Linearization {
     /// The report of the move to the central path (`None` without `kappa_grad` or without
     /// inequality constraints).
     pub fn central_report(&self) -> Option<StepReport> {
-        self.central
+        self.central.map(|c| c.report)
+    }
+    /// Whether the move to the central path fell back to the neutral start (the start from the
+    /// hard solution, `Options::central_warm_start`, failed); false without a central solve.
+    pub fn central_fallback(&self) -> bool {
+        self.central.is_some_and(|c| c.fallback)
     }
     /// Seconds spent in each phase so far.
     pub fn phase_times(&self) -> PhaseTimes {
@@ -617,5 +687,71 @@ impl Linearization {
             }
         }
         Ok(out.iter().copied().collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{BodySpec, GeomSpec, JointKind, JointSpec, ModelBuilder, Shape};
+
+    /// A 1 kg box (10 cm) sliding at 1 m/s on a floor with μ = 0.5, settled onto it.
+    fn sliding_box() -> (Model, State) {
+        let half = nalgebra::Vector3::new(0.05, 0.05, 0.05);
+        let m = ModelBuilder::new()
+            .timestep(0.01)
+            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.5))
+            .body(BodySpec::new("box", 1.0, [1.0 / 600.0; 3]).pos([0.0, 0.0, 0.05]))
+            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
+            .geom(GeomSpec::new("box", "box", Shape::Box { half_extents: half }).friction(0.5))
+            .compile()
+            .unwrap();
+        let mut s = State::reference(&m);
+        let mut ws = Workspace::new(&m);
+        for _ in 0..20 {
+            crate::step(&m, &mut s, &mut ws, &[]).unwrap();
+        }
+        let q = crate::qpos(&m, &s);
+        crate::set_minimal(&m, &mut s, &q, &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]).unwrap();
+        (m, s)
+    }
+
+    #[test]
+    fn a_failed_central_solve_from_the_hard_solution_falls_back_to_the_neutral_start() {
+        let (m, s) = sliding_box();
+        let kappa = 1e-4;
+        let mut ws = Workspace::new(&m);
+        newton::prepare(&m, &s, &mut ws, &[], &AppliedForces::default());
+        assert!(newton::solve(&m, &s, &mut ws).status.is_success());
+        let (hard_w, hard_active) = (ws.w.clone(), ws.active.clone());
+        let from_hard = |ws: &mut Workspace, warm_budget| {
+            ws.w.copy_from_slice(&hard_w);
+            ws.active.copy_from_slice(&hard_active);
+            let c = solve_central(&m, &s, ws, kappa, warm_budget).unwrap();
+            assert_eq!(c.report.status, SolveStatus::Converged, "{c:?}");
+            (c, ws.w.clone())
+        };
+        // the start from the hard solution converges on its own in a few iterations
+        let (warm, w_warm) = from_hard(&mut ws, Some(m.options.max_iter));
+        assert!(
+            !warm.fallback && (2..=10).contains(&warm.report.iterations),
+            "{warm:?}"
+        );
+        // the former path: the neutral start only
+        let (neutral, w_neutral) = from_hard(&mut ws, None);
+        assert!(neutral.report.iterations > warm.report.iterations);
+        // one iteration cannot reach the κ path: the warm solve fails and the neutral start
+        // runs from the hard velocities, exactly the former path
+        let (forced, w_forced) = from_hard(&mut ws, Some(1));
+        assert!(forced.fallback);
+        assert_eq!(forced.report.iterations, 1 + neutral.report.iterations);
+        assert_eq!(w_forced, w_neutral);
+        // one central-path point, whichever start found it
+        let scale = w_warm.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+        let diff = w_warm
+            .iter()
+            .zip(&w_forced)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(diff < 1e-8 * scale, "solutions differ by {diff:e}");
     }
 }

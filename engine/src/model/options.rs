@@ -67,6 +67,11 @@ pub struct Options {
     /// [`crate::contact::cone::NtScaling`]). Default true; false gives Dojo's unscaled
     /// linearisation of `ξ ∘ η = κe` (kept for comparison).
     pub nt_scaling: bool,
+    /// Start the central-path solve of `kappa_grad` from the step's hard solution with every
+    /// complementarity pair moved to product κ (falling back to the neutral start when that
+    /// solve fails). Default true; false starts from the neutral point directly (the former
+    /// behaviour, kept for comparison).
+    pub central_warm_start: bool,
 }
 
 impl Default for Options {
@@ -89,6 +94,7 @@ impl Default for Options {
             activation_margin: f64::INFINITY,
             kappa_grad: None,
             nt_scaling: true,
+            central_warm_start: true,
         }
     }
 }

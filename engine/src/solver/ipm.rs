@@ -23,7 +23,7 @@ use crate::state::{IterationRecord, SolveStatus, State, StepReport, Workspace};
 /// `ξ₁ - |ξ₂:₃|`, which loses relative accuracy as pairs approach their boundary; the exact
 /// Newton step converges fast in that endgame. Measured on the 14-sphere pyramid, 500 steps:
 /// 20 unconverged with scaling throughout, 12 with this floor, 117 unscaled.
-const NT_MU_FLOOR: f64 = 1e-8;
+pub(crate) const NT_MU_FLOOR: f64 = 1e-8;
 
 /// Iterative-refinement rounds of every Newton direction (see `BlockMatrix::solve_refined`).
 pub(crate) const REFINE_ROUNDS: usize = 2;
@@ -37,7 +37,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
 }
 
 /// Largest entry of the centred residual `r(w, κ)` left in `ws.residual` by `evaluate`.
-fn centred_norm(ws: &Workspace) -> f64 {
+pub(crate) fn centred_norm(ws: &Workspace) -> f64 {
     ws.residual.iter().fold(
         0.0f64,
         |m, r| if r.is_nan() { f64::NAN } else { m.max(r.abs()) },
@@ -47,7 +47,12 @@ fn centred_norm(ws: &Workspace) -> f64 {
 /// The interior-point loop. `central = None` drives complementarity to `kappa_tol` (the hard
 /// step); `Some(κ)` stops on the central path at κ: centering never targets below κ, and the
 /// solve has converged when the centred residual `r(w, κ)` is below `rtol`.
-fn solve_to(model: &Model, state: &State, ws: &mut Workspace, central: Option<f64>) -> StepReport {
+pub(crate) fn solve_to(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    central: Option<f64>,
+) -> StepReport {
     let o = &model.options;
     let p = &model.topology.pattern;
     let floor = central.unwrap_or(o.kappa_tol / o.undercut);
@@ -170,7 +175,7 @@ fn solve_to(model: &Model, state: &State, ws: &mut Workspace, central: Option<f6
 }
 
 /// `Δ ← -R⁻¹ Δ` with the current factorisation.
-fn solve_negated(ws: &mut Workspace, p: &crate::solver::graph_ldu::BlockPattern) {
+pub(crate) fn solve_negated(ws: &mut Workspace, p: &crate::solver::graph_ldu::BlockPattern) {
     ws.delta.iter_mut().for_each(|d| *d = -*d);
     ws.matrix.solve_refined(p, &mut ws.delta, REFINE_ROUNDS);
 }
@@ -178,7 +183,7 @@ fn solve_negated(ws: &mut Workspace, p: &crate::solver::graph_ldu::BlockPattern)
 /// Fractions to the boundary `(τ_ort, τ_soc)`: τ → 1 as the violations vanish (superlinear
 /// endgame), capped below 1 so rounding never lands an iterate on a cone's boundary; the
 /// second-order cones keep the τ_max cap until the iterate is within 1e-4 of converging.
-fn fractions_to_boundary(model: &Model, vio: Violation) -> (f64, f64) {
+pub(crate) fn fractions_to_boundary(model: &Model, vio: Violation) -> (f64, f64) {
     let o = &model.options;
     let worst = vio.r.max(vio.k);
     let tau_ort = o.tau_min.max(1.0 - worst.powi(2)).min(TAU_CAP);
@@ -190,7 +195,7 @@ fn fractions_to_boundary(model: &Model, vio: Violation) -> (f64, f64) {
     (tau_ort, tau_soc)
 }
 
-fn norm2(x: &[f64]) -> f64 {
+pub(crate) fn norm2(x: &[f64]) -> f64 {
     x.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
@@ -216,7 +221,7 @@ fn condition_number(ws: &Workspace, p: &crate::solver::graph_ldu::BlockPattern) 
 /// NOTE: Dojo accepts a step when either violation (eqs. 49-50) decreases. That let a box
 /// tipping onto a corner cycle forever (complementarity rising while the equality residual sat
 /// at round-off); the centred residual is the quantity the Newton step actually decreases.
-fn line_search(
+pub(crate) fn line_search(
     model: &Model,
     state: &State,
     ws: &mut Workspace,
@@ -243,22 +248,4 @@ fn line_search(
         alpha *= 0.5;
     }
     None
-}
-
-/// The central-path point at `kappa` of the prepared step: the interior solution of the relaxed
-/// problem (every complementarity pair at `b ∘ c = κ e`), the smoothed step of the gradients
-/// (`kappa_grad`). Solved by the same predictor-corrector iteration from the neutral interior
-/// point with centering floored at κ: approaching κ from above stays well inside the cones,
-/// which Newton's method started from the (boundary-hugging) hard solution does not.
-pub(crate) fn solve_central(
-    model: &Model,
-    state: &State,
-    ws: &mut Workspace,
-    kappa: f64,
-) -> StepReport {
-    // every candidate takes part: the relaxed problem gives far contacts a (small) impulse
-    // too, and the smoothed step map must not depend on the activation heuristic
-    ws.active.fill(true);
-    super::inequality::initialize(model, state, ws, false);
-    solve_to(model, state, ws, Some(kappa))
 }

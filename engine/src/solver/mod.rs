@@ -2,6 +2,7 @@
 //! (Dojo eq. 15) with the block-sparse graph factorisation of the Newton matrix.
 pub(crate) mod actuation;
 pub(crate) mod armature;
+pub(crate) mod central;
 pub(crate) mod coupling;
 pub mod dense;
 pub mod graph_ldu;

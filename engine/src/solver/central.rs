@@ -1,0 +1,322 @@
+//! The central-path point at κ of a solved step: the interior solution of the relaxed problem
+//! (every complementarity pair at `b ∘ c = κ e`), the smoothed step of the gradients
+//! (`kappa_grad`). Started either from the step's hard solution moved onto the κ central path
+//! pair by pair and solved by Newton's method at κ ([`Start::Hard`], [`follow`]), or from the
+//! neutral interior point by the predictor-corrector of [`super::ipm`] with centring floored at
+//! κ ([`Start::Neutral`], the fallback).
+//!
+//! NOTE: the hard solution itself is a poor start: its pairs sit at `b ∘ c ≈ κ_tol` on the
+//! cones' boundaries, where Newton's method hugs the boundary. Moving each pair to product κ
+//! first puts the iterate well inside, at the impulse and velocity scale of the step, while
+//! the neutral point (γ = s = 1 on hundreds of candidates) is far from both.
+use nalgebra::Vector3;
+
+use super::inequality::{
+    add_mehrotra_correction, cone_search, mean_complementarity, scale_soc_rows, update_scalings,
+};
+use super::ipm;
+use super::newton::{Violation, assemble, evaluate};
+use crate::contact::ContactModel;
+use crate::model::Model;
+use crate::state::{IterationRecord, SolveStatus, State, StepReport, Workspace};
+
+/// Where the central-path solve starts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Start {
+    /// The hard solution in `ws.w` with each pair moved to product κ ([`centre`]).
+    Hard,
+    /// The neutral point γ = s = 1, ξ = η = e; body velocities and joint impulses as in `ws.w`.
+    Neutral,
+}
+
+/// Fraction of the friction cone that a kept friction impulse may fill: `|ξ₂:₃| ≤ (1 - ε) ξ₁`.
+/// A friction impulse at the cone's rim with no slip has no centred partner (the slip speed
+/// `κ|ξ₂:₃| / det ξ` blows up); ε bounds the start's slip at `~κ / (2ε μγ)`.
+const FRICTION_RIM: f64 = 0.1;
+
+/// [`follow`] gives up (`LineSearchFailed`, so that the caller can restart from the neutral
+/// point) after `STALL_COUNT` consecutive steps shorter than `STALL_STEP`: an iterate that has
+/// drifted next to a cone's boundary, where the line search only creeps (humanoid, κ = 1e-4:
+/// eight steps below 1e-3 before the line search failed outright).
+const STALL_STEP: f64 = 1e-2;
+const STALL_COUNT: usize = 3;
+
+/// Fraction to the boundary of [`follow`] while the centred residual is above `NEAR`.
+///
+/// NOTE: the interior-point loop's fraction `1 - ‖r‖²` lets a step go 99.9% of the way to a
+/// cone's boundary at a residual of 0.03; from a start on the κ path that is too greedy: a pair
+/// left next to its boundary makes every later Newton direction useless for the merit (box
+/// pushed at 10 N, κ = 1e-4: steps of α < 1e-3, then the fallback). Measured over 30 steps at
+/// κ = 1e-4 (`gradient_phases`): panda 11 fallbacks, gymnasium humanoid 1 without the cap;
+/// with 0.9 (or 0.8) none, panda 10 iterations per solve instead of 28.
+const TAU_FAR: f64 = 0.9;
+const NEAR: f64 = 1e-6;
+
+/// Solve for the central-path point at `kappa` of the prepared, solved step in `ws` from
+/// `start`. Every candidate takes part: the relaxed problem gives far contacts a (small) impulse
+/// too, and the smoothed step map must not depend on the activation heuristic.
+pub(crate) fn solve(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    kappa: f64,
+    start: Start,
+) -> StepReport {
+    ws.active.fill(true);
+    match start {
+        Start::Hard => {
+            centre(model, state, ws, kappa);
+            follow(model, state, ws, kappa)
+        }
+        Start::Neutral => {
+            super::inequality::initialize(model, state, ws, false);
+            ipm::solve_to(model, state, ws, Some(kappa))
+        }
+    }
+}
+
+/// Newton's method on the centred residual `r(w, κ)` from a centred start (the friction cones'
+/// rows Nesterov–Todd scaled, as in the interior-point loop), with the second-order term of the
+/// complementarity rows: Mehrotra's corrector built on the Newton direction at κ itself, not on
+/// an affine direction aiming at 0, which would make the iteration converge only linearly to a
+/// point off the path's target. Converged when `‖r(w, κ)‖∞ < rtol`, the criterion of
+/// [`ipm::solve_to`].
+fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepReport {
+    let o = &model.options;
+    let p = &model.topology.pattern;
+    ws.nt.fill(None);
+    let mut report = StepReport {
+        status: SolveStatus::MaxIterations,
+        iterations: 0,
+        residual: f64::NAN,
+        complementarity: kappa,
+    };
+    let mut short_steps = 0;
+    for it in 0..o.max_iter {
+        let vio = evaluate(model, state, ws, false, kappa);
+        let centred = ipm::centred_norm(ws);
+        report.residual = centred;
+        if !(vio.r.is_finite() && vio.k.is_finite() && centred.is_finite()) {
+            report.status = SolveStatus::NonFinite;
+            break;
+        }
+        if centred < o.rtol {
+            report.status = SolveStatus::Converged;
+            break;
+        }
+        report.iterations = it + 1;
+        let mu = mean_complementarity(model, &ws.active, &ws.w, &ws.delta, 0.0);
+        ws.nt_on = o.nt_scaling && !ws.nt_disabled && mu > ipm::NT_MU_FLOOR;
+        if ws.nt_on {
+            update_scalings(model, ws);
+            scale_soc_rows(model, ws, false, kappa);
+        } else {
+            ws.nt.fill(None);
+        }
+        assemble(model, ws);
+        if ws.matrix.factor(p).is_err() {
+            report.status = SolveStatus::NonFinite;
+            break;
+        }
+        let merit = ipm::norm2(&ws.residual);
+        // Newton direction Δ_n = -R⁻¹ r(w, κ), then the corrector -R⁻¹ (r + Δb_n ∘ Δc_n)
+        ws.delta_aff.copy_from_slice(&ws.residual);
+        ws.delta_aff.iter_mut().for_each(|d| *d = -*d);
+        ws.matrix
+            .solve_refined(p, &mut ws.delta_aff, ipm::REFINE_ROUNDS);
+        ws.delta.copy_from_slice(&ws.residual);
+        add_mehrotra_correction(model, &ws.active, &ws.nt, &ws.delta_aff, &mut ws.delta);
+        ipm::solve_negated(ws, p);
+        let worst = Violation { r: centred, k: 0.0 };
+        let mut taus = ipm::fractions_to_boundary(model, worst);
+        if centred > NEAR {
+            taus = (taus.0.min(TAU_FAR), taus.1.min(TAU_FAR));
+        }
+        let mut corrector = true;
+        let accepted = match ipm::line_search(model, state, ws, kappa, merit, taus) {
+            Some(a) => Some(a),
+            None => {
+                corrector = false;
+                ws.delta.copy_from_slice(&ws.delta_aff);
+                ipm::line_search(model, state, ws, kappa, merit, taus)
+            }
+        };
+        if let Some(trace) = ws.trace.as_mut() {
+            trace.push(IterationRecord {
+                attempt: ws.attempt,
+                residual: vio.r,
+                complementarity: vio.k,
+                mu,
+                kappa,
+                alpha_aff: cone_search(model, &ws.active, &ws.w, &ws.delta_aff, 1.0, 1.0),
+                alpha: accepted.unwrap_or(0.0),
+                corrector,
+                condition: f64::NAN,
+            });
+        }
+        short_steps = match accepted {
+            Some(a) if a < STALL_STEP => short_steps + 1,
+            _ => 0,
+        };
+        if accepted.is_none() || short_steps == STALL_COUNT {
+            evaluate(model, state, ws, false, kappa);
+            report.residual = ipm::centred_norm(ws);
+            report.status = SolveStatus::LineSearchFailed;
+            break;
+        }
+    }
+    if report.status == SolveStatus::MaxIterations {
+        evaluate(model, state, ws, false, kappa);
+        report.residual = ipm::centred_norm(ws);
+    }
+    ws.nt_on = false;
+    report
+}
+
+/// Move every complementarity pair of the iterate in `ws.w` to product κ, strictly interior,
+/// keeping of each pair the member that the step determines (the impulse of a touching contact,
+/// the gap of a separated one) and raising the other: `b' = b, c' = κ / b` for the larger.
+/// Gaps, tangential velocities and limit distances are read from the residual rows at the
+/// current velocities, so candidates that the hard step left inactive start at their distance.
+pub(crate) fn centre(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) {
+    // rows `s - φ`, `η₂:₃ - v_t`, ... at the hard velocities (independent of κ)
+    evaluate(model, state, ws, false, 0.0);
+    let t = &model.topology;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let o = t.pattern.offset(t.contact_node[c]);
+        let dim = contact.model.dim();
+        let (x, r) = (&mut ws.w[o..o + dim], &ws.residual[o..o + dim]);
+        let phi = x[1] - r[0];
+        let (gamma, gap) = orthant_pair(x[0], phi, kappa);
+        x[0] = gamma;
+        x[1] = gap;
+        match contact.model {
+            ContactModel::Impact => {}
+            ContactModel::Nonlinear => {
+                let slip = [x[6] - r[6], x[7] - r[7]];
+                let (xi, eta) = friction_pair(contact.friction * gamma, [x[3], x[4]], slip, kappa);
+                x[2..5].copy_from_slice(xi.as_slice());
+                x[5..8].copy_from_slice(eta.as_slice());
+            }
+            ContactModel::Linear => {
+                // (ψ, s_ψ) and (β_i, η_i) with the slacks their equality rows imply
+                let implied_s_psi = x[3] - r[1];
+                (x[2], x[3]) = orthant_pair(x[2], implied_s_psi, kappa);
+                for i in 0..4 {
+                    let implied_eta = x[8 + i] - r[2 + i];
+                    (x[4 + i], x[8 + i]) = orthant_pair(x[4 + i], implied_eta, kappa);
+                }
+            }
+        }
+    }
+    for (j, joint) in model.joints.iter().enumerate() {
+        let Some(n) = t.limit_node[j] else { continue };
+        let o = t.pattern.offset(n);
+        for i in 0..joint.limits.len() {
+            let b = o + 4 * i;
+            for (g, s) in [(b, b + 1), (b + 2, b + 3)] {
+                // row `s - distance`
+                let distance = ws.w[s] - ws.residual[s - 1];
+                (ws.w[g], ws.w[s]) = orthant_pair(ws.w[g], distance, kappa);
+            }
+        }
+    }
+}
+
+/// An orthant pair `(b, c)` moved to `b c = κ`: the larger of the two is kept and the other
+/// raised to κ over it (a negative `c`, a penetration, counts as 0). Neither usable: both √κ.
+fn orthant_pair(b: f64, c: f64, kappa: f64) -> (f64, f64) {
+    if !(b.is_finite() && c.is_finite()) || b.max(c) <= 0.0 {
+        let r = kappa.sqrt();
+        return (r, r);
+    }
+    let (b, c) = (b.max(0.0), c.max(0.0));
+    if b >= c {
+        (b, kappa / b)
+    } else {
+        (kappa / c, c)
+    }
+}
+
+/// A friction-cone pair `(ξ, η)` on the κ central path with `ξ₁ = a = μγ`, given the step's
+/// friction impulse `friction` (ξ₂:₃) and slip velocity `slip` (η₂:₃).
+///
+/// The centred pairs with `ξ₁ = a` are a one-parameter family: `ξ = (a, -p d)`,
+/// `η = (q, u d)` with `d` a unit direction, `u = κ p / (a² - p²)`, `q = κ a / (a² - p²)`
+/// (`ξ ∘ η = κ e`). Keeping the friction magnitude (`p = |ξ₂:₃|`, a sticking contact) or the
+/// slip speed (`u = |v_t|`, a sliding one) each fixes `p`; the larger `p` is taken (both
+/// friction and slip at least their hard values, as [`orthant_pair`] raises the smaller).
+fn friction_pair(
+    a: f64,
+    friction: [f64; 2],
+    slip: [f64; 2],
+    kappa: f64,
+) -> (Vector3<f64>, Vector3<f64>) {
+    let (f, v) = (friction[0].hypot(friction[1]), slip[0].hypot(slip[1]));
+    if !(a > 0.0 && a.is_finite() && f.is_finite() && v.is_finite()) {
+        let r = kappa.sqrt();
+        return (Vector3::new(r, 0.0, 0.0), Vector3::new(r, 0.0, 0.0));
+    }
+    let p_stick = f.min((1.0 - FRICTION_RIM) * a);
+    // root of v p² + κ p - v a² = 0 in [0, a), in the form without cancellation
+    let p_slide = 2.0 * v * a * a / (kappa + (kappa * kappa + 4.0 * v * v * a * a).sqrt());
+    let (p, d) = if p_slide >= p_stick && v > 0.0 {
+        (p_slide, [slip[0] / v, slip[1] / v])
+    } else if f > 0.0 {
+        (p_stick, [-friction[0] / f, -friction[1] / f])
+    } else {
+        (0.0, [0.0, 0.0])
+    };
+    let det = (a - p) * (a + p);
+    let (u, q) = (kappa * p / det, kappa * a / det);
+    (
+        Vector3::new(a, -p * d[0], -p * d[1]),
+        Vector3::new(q, u * d[0], u * d[1]),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::cone::{soc_det, soc_product};
+
+    #[test]
+    fn friction_pairs_are_centred_and_interior() {
+        let kappa = 1e-4;
+        let cases = [
+            // sticking, sliding, at the rim without slip, separated, at rest
+            (0.02, [0.005, -0.003], [1e-11, 0.0]),
+            (0.02, [-0.02, 0.0], [0.3, 0.0]),
+            (0.02, [0.0, 0.02], [0.0, 0.0]),
+            (1e-7, [0.0, 0.0], [0.1, -0.2]),
+            (0.5, [0.0, 0.0], [0.0, 0.0]),
+        ];
+        for (a, f, v) in cases {
+            let (xi, eta) = friction_pair(a, f, v, kappa);
+            let prod = soc_product(&xi, &eta);
+            assert!(
+                (prod - Vector3::new(kappa, 0.0, 0.0)).norm() < 1e-12,
+                "{prod}"
+            );
+            assert!(soc_det(&xi) > 0.0 && soc_det(&eta) > 0.0);
+            assert_eq!(xi[0], a);
+            // friction and slip are at least their hard values (up to the rim margin)
+            let (fn_, vn) = (xi.fixed_rows::<2>(1).norm(), eta.fixed_rows::<2>(1).norm());
+            let f0 = f[0].hypot(f[1]).min((1.0 - FRICTION_RIM) * a);
+            assert!(fn_ >= f0 * (1.0 - 1e-12) || vn >= v[0].hypot(v[1]) * (1.0 - 1e-12));
+        }
+        // sliding keeps the slip speed and opposes it
+        let (xi, eta) = friction_pair(0.02, [-0.02, 0.0], [0.3, 0.0], kappa);
+        assert!((eta[1] - 0.3).abs() < 1e-12 && eta[2] == 0.0);
+        assert!(xi[1] < 0.0 && xi[1].abs() > 0.99 * 0.02);
+    }
+
+    #[test]
+    fn orthant_pairs_keep_the_larger_member() {
+        let kappa = 1e-4;
+        assert_eq!(orthant_pair(0.025, 4e-10, kappa), (0.025, kappa / 0.025));
+        assert_eq!(orthant_pair(1e-10, 0.1, kappa), (kappa / 0.1, 0.1));
+        assert_eq!(orthant_pair(0.0, -1e-3, kappa), (1e-2, 1e-2));
+        assert_eq!(orthant_pair(f64::NAN, 0.1, kappa), (1e-2, 1e-2));
+    }
+}
