@@ -302,9 +302,10 @@ pub struct Workspace {
     pub(crate) act_force: Vec<f64>,
     /// `∂k/∂x` of each joint coupling at the current configuration.
     pub(crate) coupling_slope: Vec<f64>,
+    /// Per candidate: the feature held fixed for this step (a near-flat disk's rim point, a box
+    /// corner's face), see [`crate::contact::freeze_for_step`].
+    pub(crate) frozen: Vec<Option<crate::contact::Frozen>>,
     /// Contact frames at the current configuration.
-    /// Per candidate: the rim point a near-flat disk–plane candidate is frozen at this step.
-    pub(crate) disk_rim: Vec<Option<nalgebra::Vector3<f64>>>,
     pub(crate) contact_now: Vec<crate::contact::ContactFrame>,
     /// Signed distance and its gradient row at the trial next configuration, per contact.
     pub(crate) contact_phi: Vec<f64>,
@@ -381,7 +382,7 @@ impl Workspace {
         };
         Workspace {
             contact_now: vec![empty; model.ncontact()],
-            disk_rim: vec![None; model.ncontact()],
+            frozen: vec![None; model.ncontact()],
             contact_phi: vec![0.0; model.ncontact()],
             contact_dphi: vec![[0.0; 12]; model.ncontact()],
             limit_adr,

@@ -334,6 +334,48 @@ pub fn evaluate(
     }
 }
 
+/// A ball of A against the plane of face `(axis, sign)` of box B (a frozen box–box corner,
+/// [`super::Frozen::Face`]): `φ = ± q_axis − half_axis − r` with `q` the centre in B's frame.
+pub fn ball_box_face(
+    a: &Ball,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+    axis: usize,
+    sign: f64,
+) -> Witness {
+    kernels::ball_box_face(a, pose_a, half_b, pose_b, axis, sign)
+}
+
+/// Box A's face `(axis, sign)` against a ball of B: [`ball_box_face`] with the roles exchanged.
+pub fn box_face_ball(
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    b: &Ball,
+    pose_b: &GeomPose,
+    axis: usize,
+    sign: f64,
+) -> Witness {
+    let w = kernels::ball_box_face(b, pose_b, half_a, pose_a, axis, sign);
+    Witness {
+        phi: w.phi,
+        point_a: w.point_b,
+        point_b: w.point_a,
+        normal: -w.normal,
+    }
+}
+
+/// The separating axis of least overlap of boxes A and B among their six face normals (unit,
+/// world, pointing from B towards A); ties go to B's axes, then the lower axis.
+pub fn box_box_axis(
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+) -> Vector3<f64> {
+    kernels::box_box_axis(half_a, pose_a, half_b, pose_b)
+}
+
 /// Ball of the given centre and radius.
 fn ball(center: Vector3<f64>, radius: f64) -> Ball {
     Ball { center, radius }

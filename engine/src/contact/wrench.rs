@@ -7,7 +7,7 @@
 //! as `−f` at `p_b`.
 use nalgebra::Vector3;
 
-use super::witness;
+use super::{freeze_for_step, predicted_pose, witness_frozen};
 use crate::joints::geometry::Pose;
 use crate::math::spatial::basis_from_axis;
 use crate::model::Model;
@@ -38,7 +38,15 @@ pub fn contact_forces(model: &Model, state: &State, state_next: &State) -> Conta
         if f_c == Vector3::zeros() {
             continue;
         }
-        let (w, _, _) = witness(c, &model.geoms, pose);
+        // the frame the step's impulse acted along: the candidate as frozen for the step
+        let (ga, gb) = (&model.geoms[c.geom_a], &model.geoms[c.geom_b]);
+        let frozen = freeze_for_step(
+            c,
+            &model.geoms,
+            &predicted_pose(state, ga.body, h),
+            &predicted_pose(state, gb.body, h),
+        );
+        let (w, _, _) = witness_frozen(c, &model.geoms, pose, frozen);
         // f = [n t1 t2] f_c on a at p_a; -f on b at p_b
         let f = basis_from_axis(&w.normal) * f_c;
         let bodies = [

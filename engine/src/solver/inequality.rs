@@ -14,7 +14,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::contact::cone::{NtScaling, arrow, orthant_step, soc_product, soc_step};
-use crate::contact::{ContactFrame, ContactModel, witness_frozen};
+use crate::contact::{ContactFrame, ContactModel, Frozen, predicted_pose, witness_frozen};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::model::Model;
 use crate::model::topology_body_node as body_node;
@@ -127,8 +127,8 @@ pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm:
 }
 
 /// Contact frames at the current configuration (impulse directions, tangential velocity map),
-/// and the rim points of near-flat disk candidates, frozen for the step
-/// ([`crate::contact::disk_rim_for_step`]).
+/// and the features held fixed for the step (near-flat disk rim points, box corners' faces:
+/// [`crate::contact::freeze_for_step`]).
 pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     for c in 0..model.ncontact() {
         prepare_candidate(model, state, ws, c);
@@ -139,26 +139,15 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
 pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace, c: usize) {
     let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
     let h = model.options.timestep;
-    let predicted = |b: usize| {
-        if b == 0 {
-            return Pose::world();
-        }
-        let (p, (v, w)) = (state.pose(b), state.velocity(b));
-        Pose {
-            pos: p.pos + h * v,
-            quat: p.quat * crate::math::quat::step_map(&w, h),
-        }
-    };
     let contact = &model.contacts[c];
     let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
-    ws.disk_rim[c] = crate::contact::disk_rim_for_step(
+    ws.frozen[c] = crate::contact::freeze_for_step(
         contact,
         &model.geoms,
-        &predicted(ga.body),
-        &predicted(gb.body),
-        false,
+        &predicted_pose(state, ga.body, h),
+        &predicted_pose(state, gb.body, h),
     );
-    let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.disk_rim[c]);
+    let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
     ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);
 }
 
@@ -234,7 +223,7 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
             contact,
             &model.geoms,
             |x| if x == 0 { Pose::world() } else { next[x] },
-            ws.disk_rim[c],
+            ws.frozen[c],
         );
         if wit.phi.is_nan() || wit.phi <= floor {
             ws.active[c] = true;
@@ -258,7 +247,7 @@ const DISK_REFREEZE_TOL: f64 = 1e-10;
 pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
     let mut n = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
-        if ws.disk_rim[c].is_none() || !ws.active[c] {
+        if !matches!(ws.frozen[c], Some(Frozen::Rim(_))) || !ws.active[c] {
             continue;
         }
         let next = |x: usize| {
@@ -270,8 +259,8 @@ pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
         };
         let (exact, pa, pb) = witness_frozen(contact, &model.geoms, next, None);
         if exact.phi < -DISK_REFREEZE_TOL {
-            ws.disk_rim[c] =
-                crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true);
+            ws.frozen[c] = crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true)
+                .map(Frozen::Rim);
             n += 1;
         }
     }
@@ -323,7 +312,7 @@ pub(crate) fn evaluate(
                     Pose::world()
                 }
             },
-            ws.disk_rim[c],
+            ws.frozen[c],
         );
         let frame = ContactFrame::new(&wit, &pa, &pb);
         ws.contact_phi[c] = wit.phi;

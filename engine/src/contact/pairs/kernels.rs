@@ -240,3 +240,53 @@ pub(super) fn box_sphere(
         normal: -w.normal,
     }
 }
+
+/// Ball of A against the plane of face `(axis, sign)` of box B, whatever side of the face's
+/// edges the centre lies: the witness on B is the centre's projection onto the face plane.
+pub(super) fn ball_box_face(
+    a: &Ball,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+    axis: usize,
+    sign: f64,
+) -> Witness {
+    let center = pose_a.transform_point(&a.center);
+    let q = pose_b.rot.transpose() * (center - pose_b.pos); // centre in B's frame
+    let normal = sign * self::axis(pose_b, axis);
+    let mut on_face = q;
+    on_face[axis] = sign * half_b[axis];
+    Witness {
+        phi: sign * q[axis] - half_b[axis] - a.radius, // φ = ±q_k − h_k − r
+        point_a: center - a.radius * normal,
+        point_b: pose_b.transform_point(&on_face),
+        normal,
+    }
+}
+
+/// The face normal of A or B along which the two boxes overlap least (or are separated most):
+/// separation `|uᵀ(c_a − c_b)| − Σ_k h_k |uᵀ e_k|` over both boxes' axes `e_k`, oriented
+/// from B towards A.
+pub(super) fn box_box_axis(
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+) -> Vector3<f64> {
+    let d = pose_a.pos - pose_b.pos;
+    let radius = |half: &Vector3<f64>, pose: &GeomPose, u: &Vector3<f64>| -> f64 {
+        (0..3).map(|k| half[k] * u.dot(&axis(pose, k)).abs()).sum()
+    };
+    let mut best = (f64::NEG_INFINITY, axis(pose_b, 2));
+    for pose in [pose_b, pose_a] {
+        for k in 0..3 {
+            let u = axis(pose, k);
+            let sep = u.dot(&d).abs() - radius(half_a, pose_a, &u) - radius(half_b, pose_b, &u);
+            if sep > best.0 {
+                best = (sep, u);
+            }
+        }
+    }
+    let u = best.1;
+    if u.dot(&d) < 0.0 { -u } else { u }
+}
