@@ -52,12 +52,12 @@ pub struct Options {
     /// is checked at the new configuration and the step is solved again with it active if its
     /// distance fell below `activation_margin / 4`, so no contact the step makes is missed.
     /// A solve that fails with candidates left out is solved again with all of them active.
-    /// `f64::INFINITY` (the default) keeps every candidate active; 0.01 is the value benchmarked
-    /// in BENCHMARKS.md (A1 drop 11-15x faster per step). Not yet the default, measured
-    /// 2026-11-23 with 0.01: 1000 random stress scenes 69 failing (74 all-active), the 14-sphere
-    /// pyramid 0/500 unconverged (19 all-active), but the 1000 kg box landing on a 1 kg box
-    /// (`tests/stacks.rs`) stalls on its impact step: the landing candidates, inactive the step
-    /// before, are warm-started on their cone boundary.
+    /// Default 0.01 m; `f64::INFINITY` keeps every candidate active. Measured 2026-11-23
+    /// (all-active → 0.01): 1000 random stress scenes 74 → 69 failing in half the time, the
+    /// 14-sphere pyramid 19/500 unconverged steps → 0, every `cargo test` and pytest case as
+    /// before. (It became the default once box corners on a box were measured against the
+    /// pair's contact face: before, a 1000 kg box on a 1 kg box sank into it and its corners
+    /// flickered in and out of the active set, stalling the solve.)
     pub activation_margin: f64,
     /// Central-path parameter at which gradients are taken (`None`: the exact derivative at the
     /// simulated solution). The step itself is always solved to `kappa_tol`; see
@@ -91,7 +91,7 @@ impl Default for Options {
             warm_start_margin: 1e-6,
             tau_min: 0.95,
             tau_max: 0.99,
-            activation_margin: f64::INFINITY,
+            activation_margin: 0.01,
             kappa_grad: None,
             nt_scaling: true,
             central_warm_start: true,
