@@ -443,6 +443,7 @@ impl PyModel {
             ("undercut", o.undercut),
             ("regularization", o.regularization),
             ("activation_margin", o.activation_margin),
+            ("max_subdivisions", o.max_subdivisions as f64),
             ("kappa_grad", o.kappa_grad.unwrap_or(0.0)),
         ]
         .into_iter()
@@ -480,7 +481,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -499,6 +500,7 @@ impl PyModel {
         activation_margin: Option<f64>,
         nt_scaling: Option<bool>,
         central_warm_start: Option<bool>,
+        max_subdivisions: Option<u32>,
     ) -> PyResult<PyModel> {
         guard(|| {
             let mut o = self.inner.options.clone();
@@ -515,6 +517,7 @@ impl PyModel {
             o.warm_start = warm_start.unwrap_or(o.warm_start);
             o.nt_scaling = nt_scaling.unwrap_or(o.nt_scaling);
             o.central_warm_start = central_warm_start.unwrap_or(o.central_warm_start);
+            o.max_subdivisions = max_subdivisions.unwrap_or(o.max_subdivisions);
             // activation_margin = inf keeps every contact candidate active
             o.activation_margin = activation_margin.unwrap_or(o.activation_margin);
             // kappa_grad = 0 selects the exact (unsmoothed) derivative

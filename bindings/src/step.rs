@@ -20,6 +20,9 @@ pub struct PyStepInfo {
     pub residual: f64,
     /// Final complementarity violation.
     pub complementarity: f64,
+    /// Equal sub-steps the step took: 1, or n > 1 when the whole step's solve failed and n
+    /// sub-steps of timestep / n succeeded (option `max_subdivisions`).
+    pub subdivisions: u32,
 }
 
 #[pymethods]
@@ -32,8 +35,8 @@ impl PyStepInfo {
     }
     fn __repr__(&self) -> String {
         format!(
-            "StepInfo(status={:?}, iterations={}, residual={:.3e})",
-            self.status, self.iterations, self.residual
+            "StepInfo(status={:?}, iterations={}, residual={:.3e}, subdivisions={})",
+            self.status, self.iterations, self.residual, self.subdivisions
         )
     }
 }
@@ -45,6 +48,7 @@ impl From<StepReport> for PyStepInfo {
             iterations: r.iterations,
             residual: r.residual,
             complementarity: r.complementarity,
+            subdivisions: r.subdivisions,
         }
     }
 }
@@ -169,6 +173,7 @@ struct Recorder {
     status: Vec<u8>,
     iterations: Vec<i64>,
     residual: Vec<f64>,
+    subdivisions: Vec<i64>,
 }
 
 impl Recorder {
@@ -184,6 +189,7 @@ impl Recorder {
             status: Vec::with_capacity(nstep),
             iterations: Vec::with_capacity(nstep),
             residual: Vec::with_capacity(nstep),
+            subdivisions: Vec::with_capacity(nstep),
         }
     }
     fn record_state(&mut self, m: &ukemi_engine::Model, s: &ukemi_engine::State) {
@@ -203,6 +209,7 @@ impl Recorder {
         self.status.push(r.status.code());
         self.iterations.push(r.iterations as i64);
         self.residual.push(r.residual);
+        self.subdivisions.push(r.subdivisions as i64);
     }
     fn into_dict<'py>(
         self,
@@ -228,6 +235,7 @@ impl Recorder {
         d.set_item("status", PyArray1::from_vec(py, self.status))?;
         d.set_item("iterations", PyArray1::from_vec(py, self.iterations))?;
         d.set_item("residual", PyArray1::from_vec(py, self.residual))?;
+        d.set_item("subdivisions", PyArray1::from_vec(py, self.subdivisions))?;
         Ok(d)
     }
 }

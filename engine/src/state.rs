@@ -165,6 +165,37 @@ impl State {
         out
     }
 
+    /// Add the impulses of `other` (a state of the same model) to this state's: joint impulses
+    /// and the impulse entries of every inequality node (γ, friction; limit and tendon γ's),
+    /// leaving slacks and velocity-like entries alone. Sums the sub-steps of a subdivided step,
+    /// so that the state reports the impulse over the whole step and warm-starts the next
+    /// full step at the right scale.
+    pub(crate) fn add_impulses(&mut self, model: &Model, other: &State) {
+        use crate::contact::ContactModel;
+        for (a, b) in self.joint_impulse.iter_mut().zip(&other.joint_impulse) {
+            *a += b;
+        }
+        let mut k = 0;
+        let add = |k: usize, idx: &[usize], me: &mut [f64]| {
+            for &i in idx {
+                me[k + i] += other.ineq_vars[k + i];
+            }
+        };
+        for c in &model.contacts {
+            let idx: &[usize] = match c.model {
+                ContactModel::Impact => &[0],
+                ContactModel::Nonlinear => &[0, 2, 3, 4],
+                ContactModel::Linear => &[0, 3, 4, 5, 6, 7],
+            };
+            add(k, idx, &mut self.ineq_vars);
+            k += c.model.dim();
+        }
+        while k < self.ineq_vars.len() {
+            add(k, &[0, 2], &mut self.ineq_vars); // limit dofs and tendon limits: [γ_lo, s_lo, γ_hi, s_hi]
+            k += 4;
+        }
+    }
+
     /// Length `Σ coef q` of each tendon limit's tendon (m or rad). Shape (n tendon limits,).
     pub fn tendon_length(&self, model: &Model) -> Vec<f64> {
         let q = crate::joints::coordinates::qpos(model, self);
@@ -245,6 +276,11 @@ pub struct StepReport {
     pub residual: f64,
     /// Final complementarity violation (0 without inequality constraints).
     pub complementarity: f64,
+    /// Equal sub-steps the step was taken in: 1, or `n > 1` when the solve of the whole step
+    /// failed and `n` sub-steps of `h / n` succeeded ([`crate::Options::max_subdivisions`]);
+    /// iterations then count every attempt, residual and complementarity are the worst
+    /// sub-step's.
+    pub subdivisions: u32,
 }
 
 /// One interior-point iteration, as recorded by [`Workspace::set_trace`] (the convergence study

@@ -3,7 +3,7 @@
 use crate::model::Model;
 use crate::solver::newton;
 pub use crate::solver::newton::AppliedForces;
-use crate::state::{State, StepReport, Workspace};
+use crate::state::{SolveStatus, State, StepReport, Workspace};
 use crate::{Error, Result, ensure};
 
 /// Check a step's inputs: sizes, finiteness, and that state and workspace belong to `model`.
@@ -94,8 +94,88 @@ pub fn step_with(
     validate_inputs(model, state, ws, ctrl, forces)?;
     newton::prepare(model, state, ws, ctrl, forces);
     let report = newton::solve(model, state, ws);
+    let failed = (!report.status.is_success()).then(|| state.clone());
     newton::write_state(model, state, ws);
-    Ok(report)
+    match failed {
+        Some(start) if model.options.max_subdivisions > 1 => {
+            // keep the failed iterate (written above) unless a subdivision succeeds
+            let mut s = start;
+            let sub = subdivided(model, &mut s, ws, ctrl, forces)?;
+            Ok(match sub {
+                Ok(r) => {
+                    *state = s;
+                    StepReport {
+                        iterations: r.iterations + report.iterations,
+                        ..r
+                    }
+                }
+                Err(iterations) => StepReport {
+                    iterations: iterations + report.iterations,
+                    ..report
+                },
+            })
+        }
+        _ => Ok(report),
+    }
+}
+
+/// A step whose solve failed, taken again as `n` = 2, 4, … ≤ `max_subdivisions` equal
+/// sub-steps from `state` under the same control and forces. On success `state` holds the end
+/// of the last sub-step with the impulses summed over the sub-steps ([`State::add_impulses`])
+/// and the report; otherwise `Err(iterations spent)` and `state` is untouched.
+fn subdivided(
+    model: &Model,
+    state: &mut State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+) -> Result<std::result::Result<StepReport, usize>> {
+    let h = model.options.timestep;
+    let mut iterations = 0;
+    let mut n = 2;
+    while n <= model.options.max_subdivisions {
+        let sub = model.with_options(crate::Options {
+            timestep: h / n as f64,
+            ..model.options.clone()
+        })?;
+        let mut report = StepReport {
+            status: SolveStatus::Converged,
+            iterations: 0,
+            residual: 0.0,
+            complementarity: 0.0,
+            subdivisions: n,
+        };
+        let mut ends: Vec<State> = Vec::with_capacity(n as usize);
+        let mut s = state.clone();
+        for _ in 0..n {
+            newton::prepare(&sub, &s, ws, ctrl, forces);
+            let r = newton::solve(&sub, &s, ws);
+            iterations += r.iterations;
+            if !r.status.is_success() {
+                report.status = r.status;
+                break;
+            }
+            if r.status == SolveStatus::Acceptable {
+                report.status = SolveStatus::Acceptable;
+            }
+            report.residual = report.residual.max(r.residual);
+            report.complementarity = report.complementarity.max(r.complementarity);
+            newton::write_state(&sub, &mut s, ws);
+            ends.push(s.clone());
+        }
+        if report.status.is_success() {
+            // the last sub-step's poses, velocities and slacks; the whole step's impulses
+            for end in &ends[..ends.len() - 1] {
+                s.add_impulses(model, end);
+            }
+            s.time = state.time + h;
+            *state = s;
+            report.iterations = iterations;
+            return Ok(Ok(report));
+        }
+        n *= 2;
+    }
+    Ok(Err(iterations))
 }
 
 /// Step `nstep` times with controls `ctrls` (row-major `(nstep, nu)`), calling `record` after every

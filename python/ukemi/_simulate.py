@@ -44,7 +44,8 @@ def step(model, state, ctrl=None, *, qfrc_applied=None, xfrc_applied=None, on_fa
 
     Returns:
         (next_state, info): ``info.status``, ``info.iterations``, ``info.residual``,
-        ``info.complementarity``.
+        ``info.complementarity``, ``info.subdivisions`` (1, or the n equal sub-steps of
+        timestep / n a step took after its whole-step solve failed).
 
     Raises:
         TypeError, ShapeError, InputError, ModelMismatchError: bad arguments.
@@ -123,6 +124,9 @@ class Trajectory:
     iterations: np.ndarray  #: (T,)
     residual: np.ndarray  #: (T,)
     final_state: object  #: ukemi.State after the last step
+    #: (T,) equal sub-steps each step took (1; n > 1 when the whole step's solve failed and n
+    #: sub-steps of timestep / n succeeded, see ``Model.with_options(max_subdivisions=...)``)
+    subdivisions: np.ndarray | None = None
 
     @property
     def converged(self) -> bool:
@@ -171,7 +175,8 @@ def rollout(model, state, ctrls=None, *, nsteps=None, on_failure="raise") -> Tra
     arrays, final = _ukemi._rollout(model, state, ctrls, on_failure == "raise")
     status = np.asarray(STATUS_NAMES, dtype=object)[arrays["status"]].astype(str)
     traj = Trajectory(arrays["qpos"], arrays["qvel"], arrays["time"], arrays["body_pos"],
-                      arrays["body_quat"], arrays["min_distance"], status, arrays["iterations"], arrays["residual"], final)
+                      arrays["body_quat"], arrays["min_distance"], status, arrays["iterations"], arrays["residual"], final,
+                      arrays["subdivisions"])
     if on_failure == "raise" and not traj.converged:
         k = int(np.argmax(~np.isin(status, SUCCESS)))
         raise ConvergenceError(

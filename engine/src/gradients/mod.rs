@@ -218,6 +218,7 @@ pub fn step_smoothed(
             iterations: 0,
             residual: 0.0,
             complementarity: 0.0,
+            subdivisions: 1,
         },
         |c| c.report,
     ))

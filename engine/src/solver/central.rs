@@ -90,6 +90,7 @@ fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepR
         iterations: 0,
         residual: f64::NAN,
         complementarity: kappa,
+        subdivisions: 1,
     };
     let mut short_steps = 0;
     for it in 0..o.max_iter {

@@ -63,6 +63,7 @@ pub(crate) fn solve_to(
         iterations: 0,
         residual: vio.r,
         complementarity: vio.k,
+        subdivisions: 1,
     };
     for it in 0..o.max_iter {
         if !(vio.r.is_finite() && vio.k.is_finite()) {

@@ -613,6 +613,7 @@ fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport 
         iterations: 0,
         residual: norm,
         complementarity: 0.0,
+        subdivisions: 1,
     };
     for it in 0..opts.max_iter {
         if !norm.is_finite() {
