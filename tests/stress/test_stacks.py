@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 import ukemi
 
@@ -55,11 +54,8 @@ def test_pyramid_of_spheres():
     assert_stable(m, tr)
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "known engine limit (README: dynamic multi-body contact not yet robust); measured "
-    "2026-11-23 (iterative refinement + acceptable status): 14 spheres, dt 0.01, 19/500 "
-    "unconverged (12 line_search_failed, 7 max_iterations), first at step 456, and 138 "
-    "'acceptable' steps (before: 117/500 from step 178)"))
+# formerly xfail (19/500 unconverged); passes at 500 steps since contact activation became the
+# default (2026-11-23)
 def test_pyramid_of_14_spheres():
     m = sphere_pyramid(3)
     tr = ukemi.rollout(m, m.make_state(), nsteps=steps(200, 500), on_failure="return")
