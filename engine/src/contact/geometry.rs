@@ -285,6 +285,18 @@ pub struct Witness {
     pub normal: Vector3<f64>,
 }
 
+impl Witness {
+    /// The same witness seen with the two geoms exchanged (B's candidate evaluated as A's).
+    pub fn swapped(self) -> Witness {
+        Witness {
+            phi: self.phi,
+            point_a: self.point_b,
+            point_b: self.point_a,
+            normal: -self.normal,
+        }
+    }
+}
+
 /// Candidates for shape A against shape B, or `Err(message)` if the pair is unsupported or a
 /// dimension is negative or not finite.
 ///
@@ -356,13 +368,7 @@ pub fn box_face_ball(
     axis: usize,
     sign: f64,
 ) -> Witness {
-    let w = kernels::ball_box_face(b, pose_b, half_a, pose_a, axis, sign);
-    Witness {
-        phi: w.phi,
-        point_a: w.point_b,
-        point_b: w.point_a,
-        normal: -w.normal,
-    }
+    kernels::ball_box_face(b, pose_b, half_a, pose_a, axis, sign).swapped()
 }
 
 /// The separating axis of least overlap of boxes A and B among their six face normals (unit,

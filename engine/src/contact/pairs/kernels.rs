@@ -232,13 +232,7 @@ pub(super) fn box_sphere(
     b: &Ball,
     pose_b: &GeomPose,
 ) -> Witness {
-    let w = sphere_box_world(&pose_b.transform_point(&b.center), b.radius, half_a, pose_a);
-    Witness {
-        phi: w.phi,
-        point_a: w.point_b,
-        point_b: w.point_a,
-        normal: -w.normal,
-    }
+    sphere_box_world(&pose_b.transform_point(&b.center), b.radius, half_a, pose_a).swapped()
 }
 
 /// Ball of A against the plane of face `(axis, sign)` of box B, whatever side of the face's
