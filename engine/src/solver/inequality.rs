@@ -45,7 +45,7 @@ const SOC: (usize, usize, usize) = (2, 5, 3);
 /// Visit every complementarity pair of the step: `f(offset, primal, dual, row, is_soc)` with
 /// node-local indices relative to the node offset. Inactive contact candidates (`active[c]`
 /// false) are left out.
-fn for_each_pair(
+pub(crate) fn for_each_pair(
     model: &Model,
     active: &[bool],
     mut f: impl FnMut(usize, usize, usize, usize, bool),
@@ -332,10 +332,11 @@ pub(crate) fn evaluate(
             ws.limit_dtheta[la + i].copy_from_slice(&jf[12 * dof..12 * dof + 12]);
             let x = &w[o + 4 * i..o + 4 * i + 4];
             let r = &mut residual[o + 4 * i..o + 4 * i + 4];
+            // products only: `violations` shifts every pair's row by κ
             r[0] = x[1] - (theta - lo);
-            r[1] = x[0] * x[1] - kappa;
+            r[1] = x[0] * x[1];
             r[2] = x[3] - (hi - theta);
-            r[3] = x[2] * x[3] - kappa;
+            r[3] = x[2] * x[3];
             // generalized limit impulse γ_lo - γ_hi on the dof, through J_f at the current configuration
             let imp = x[0] - x[2];
             let fa = ws.free_adr[j] + 12 * dof;
@@ -349,7 +350,7 @@ pub(crate) fn evaluate(
             }
         }
     }
-    super::tendon::add_rows(model, ws, w, residual, kappa);
+    super::tendon::add_rows(model, ws, w, residual);
     violations(model, &ws.active, w, residual, kappa)
 }
 

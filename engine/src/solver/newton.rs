@@ -896,6 +896,43 @@ mod tests {
         }
     }
 
+    /// The central path puts every complementarity pair (contact orthant and cone, joint limit,
+    /// tendon limit) at the same κ: a pair with `b ∘ c = κe` has zero rows. (Limit rows were
+    /// once shifted twice, so limits sat at 2κ; the humanoid's 42 limit pairs outnumber its
+    /// active contacts, so μ stopped falling once σ > 1/2 and its steps stalled.)
+    #[test]
+    fn every_complementarity_pair_is_centred_at_the_same_kappa() {
+        let kappa = 0.3;
+        for model in [
+            contact_model(),
+            tendon_model(&[("j1", 1.0)], (-0.4, 0.6), true),
+        ] {
+            let state = crate::State::reference(&model);
+            let mut ws = Workspace::new(&model);
+            prepare(&model, &state, &mut ws, &[], &AppliedForces::default());
+            ws.active.fill(true);
+            let mut pairs = Vec::new();
+            super::super::inequality::for_each_pair(&model, &ws.active, |o, p, d, row, soc| {
+                pairs.push((o, p, d, row, if soc { 3 } else { 1 }));
+            });
+            let kinds = (model.contacts.len(), model.tendon_limits.len());
+            assert!(pairs.len() >= 4, "{kinds:?}");
+            for &(o, p, d, _, n) in &pairs {
+                for i in 0..n {
+                    ws.w[o + p + i] = if i == 0 { 2.0 } else { 0.0 };
+                    ws.w[o + d + i] = if i == 0 { kappa / 2.0 } else { 0.0 };
+                }
+            }
+            evaluate(&model, &state, &mut ws, false, kappa);
+            for &(o, _, _, row, n) in &pairs {
+                for i in 0..n {
+                    let r = ws.residual[o + row + i];
+                    assert!(r.abs() < 1e-15, "{kinds:?}: row {} = {r}", o + row + i);
+                }
+            }
+        }
+    }
+
     #[test]
     fn newton_matrix_matches_finite_differences_of_the_residual() {
         check_newton_matrix(&model(), 0.0);

@@ -31,7 +31,7 @@ fn next_length(model: &Model, ws: &Workspace, t: usize) -> f64 {
 
 /// Slack and complementarity rows of every tendon limit at the iterate `w`, and their impulses
 /// on the body rows (needs `ws.next_pose` and the current free Jacobians).
-pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut [f64], kappa: f64) {
+pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut [f64]) {
     let t = &model.topology;
     for (k, tendon) in model.tendon_limits.iter().enumerate() {
         let o = t.pattern.offset(t.tendon_node[k]);
@@ -40,9 +40,9 @@ pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut 
         let x = &w[o..o + 4];
         let r = &mut residual[o..o + 4];
         r[0] = x[1] - (len - lo);
-        r[1] = x[0] * x[1] - kappa;
+        r[1] = x[0] * x[1];
         r[2] = x[3] - (hi - len);
-        r[3] = x[2] * x[3] - kappa;
+        r[3] = x[2] * x[3];
         let imp = x[0] - x[2];
         for &(ji, dof, coef) in &tendon.terms {
             let joint = &model.joints[ji];
