@@ -23,7 +23,7 @@ def main() -> None:
     p.add_argument("--option", action="append", default=[],
                    help="NAME=VALUE passed to model.with_options (repeatable)")
     a = p.parse_args()
-    opts = {k: float(v) for k, v in (o.split("=", 1) for o in a.option)}
+    opts = {k: (v == "true" if v in ("true", "false") else float(v)) for k, v in (o.split("=", 1) for o in a.option)}
     m = ukemi.load(a.model).with_options(**opts)
     rng = np.random.default_rng(a.seed)
     s, cr, rows = m.make_state(), m.actuator_ctrlrange, []
