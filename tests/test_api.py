@@ -166,8 +166,11 @@ def test_fast_spin_is_reported_never_a_crash(free_body):
     s2, info = ukemi.step(free_body, s)
     assert info.converged and info.subdivisions == 2
     assert s2.energy() == pytest.approx(s.energy(), rel=1e-10)
-    # past 8 sub-steps' limit (1600 rad/s): reported, finite
-    fast = free_body.make_state(qvel=[0, 0, 0, 0, 0, 2000.0])
+    # 2000 rad/s needs 16 sub-steps (limit 3200 rad/s)
+    s3, info = ukemi.step(free_body, free_body.make_state(qvel=[0, 0, 0, 0, 0, 2000.0]))
+    assert info.converged and info.subdivisions == 16
+    # past 32 sub-steps' limit (6400 rad/s): reported, finite
+    fast = free_body.make_state(qvel=[0, 0, 0, 0, 0, 10000.0])
     s3, info = ukemi.step(free_body, fast, on_failure="return")
     assert info.status not in ukemi.SUCCESS_STATUSES and info.subdivisions == 1
     assert np.all(np.isfinite(s3.qpos))

@@ -20,13 +20,17 @@ def main() -> None:
     p.add_argument("model")
     p.add_argument("--steps", type=int, default=30)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--qpos0", action="store_true",
+                   help="start from qpos0 instead of the first keyframe (as table5.py does)")
     p.add_argument("--option", action="append", default=[],
                    help="NAME=VALUE passed to model.with_options (repeatable)")
     a = p.parse_args()
     opts = {k: (v == "true" if v in ("true", "false") else float(v)) for k, v in (o.split("=", 1) for o in a.option)}
     m = ukemi.load(a.model).with_options(**opts)
     rng = np.random.default_rng(a.seed)
-    s, cr, rows = m.make_state(), m.actuator_ctrlrange, []
+    key = m.keyframe_names[0] if m.keyframe_names and not a.qpos0 else None
+    s = m.make_state(key=key) if key else m.make_state()
+    cr, rows = m.actuator_ctrlrange, []
     for _ in range(a.steps):
         u = rng.uniform(cr[:, 0], cr[:, 1])
         t0 = time.perf_counter()

@@ -75,9 +75,10 @@ pub struct Options {
     /// A step whose solve fails is taken again as 2, then 4, … up to this many equal
     /// sub-steps of `h / n` from the same state (each solved like a step; the control and
     /// applied forces held), and reported with [`crate::StepReport::subdivisions`]. 1 turns
-    /// it off. Default 8. Why: the solves that still fail are stiff at `h` (a spinning chain at
+    /// it off. Default 32. Why: the solves that still fail are stiff at `h` (a spinning chain at
     /// `h |ω|` ≈ 0.1–0.3 whose smooth Newton matrix turns singular, a first impact of many
     /// contacts); at `h / 2` most converge (measured on the 74 failing random stress scenes).
+    /// One step of the 10⁵-step random-control hopper needs 16 (`tests/stress` measure).
     /// Gradients through a subdivided step are not available yet: they report the step as
     /// not converged.
     pub max_subdivisions: u32,
@@ -104,7 +105,7 @@ impl Default for Options {
             kappa_grad: None,
             nt_scaling: true,
             central_warm_start: true,
-            max_subdivisions: 8,
+            max_subdivisions: 32,
         }
     }
 }
