@@ -2,7 +2,6 @@
 //! `Model.from_urdf_path` / `Model.from_urdf_string`. Warnings about ignored features are issued
 //! as Python `UserWarning`s.
 use std::path::Path;
-use std::sync::Arc;
 
 use pyo3::prelude::*;
 use ukemi_engine::mjcf::{self, MjcfModel};
@@ -14,9 +13,7 @@ use crate::model::PyModel;
 fn finish(py: Python<'_>, loaded: ukemi_engine::Result<MjcfModel>) -> PyResult<PyModel> {
     let loaded = loaded.py()?;
     warn_all(py, &loaded.warnings)?;
-    Ok(PyModel {
-        inner: Arc::new(loaded.model),
-    })
+    Ok(PyModel::new(loaded.model))
 }
 
 fn warn_all(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
@@ -48,9 +45,7 @@ pub fn from_string(py: Python<'_>, xml: &str) -> PyResult<PyModel> {
 fn finish_urdf(py: Python<'_>, loaded: ukemi_engine::Result<UrdfModel>) -> PyResult<PyModel> {
     let loaded = loaded.py()?;
     warn_all(py, &loaded.warnings)?;
-    Ok(PyModel {
-        inner: Arc::new(loaded.model),
-    })
+    Ok(PyModel::new(loaded.model))
 }
 
 /// Load a URDF file with a floating or fixed base.

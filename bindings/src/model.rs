@@ -1,12 +1,12 @@
 //! `ModelBuilder` and `Model` classes: thin wrappers over the engine's builder and compiled model.
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use nalgebra::{Matrix3, Vector3};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use ukemi_engine::{
     ActuatorSpec, BodySpec, ContactModel, GeomSpec, JointKind, JointSpec, Model, ModelBuilder,
-    Shape, State,
+    Shape, State, Workspace,
 };
 
 use crate::errors::{IntoPy, ModelError, guard};
@@ -187,11 +187,7 @@ impl PyModelBuilder {
     }
 
     fn compile(&self) -> PyResult<PyModel> {
-        guard(|| {
-            Ok(PyModel {
-                inner: Arc::new(self.inner.compile().py()?),
-            })
-        })
+        guard(|| Ok(PyModel::new(self.inner.compile().py()?)))
     }
 }
 
@@ -199,6 +195,36 @@ impl PyModelBuilder {
 #[pyclass(name = "Model", module = "ukemi._ukemi", frozen)]
 pub struct PyModel {
     pub inner: Arc<Model>,
+    /// Solver workspaces of finished calls, reused by the next ones: a workspace holds the
+    /// Newton matrix of every contact candidate (megabytes for a robot), and allocating it
+    /// for each `ukemi.step` cost more than the step (panda: 3.4 ms per step). Every step
+    /// reinitialises what it reads, so results do not depend on the workspace's history.
+    workspaces: Mutex<Vec<Workspace>>,
+}
+
+impl PyModel {
+    pub fn new(inner: Model) -> Self {
+        PyModel {
+            inner: Arc::new(inner),
+            workspaces: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// A workspace for this model: a pooled one, or a new one when all are in use.
+    pub fn take_workspace(&self) -> Workspace {
+        let pooled = self.pool().pop();
+        pooled.unwrap_or_else(|| Workspace::new(&self.inner))
+    }
+
+    /// Return a workspace to the pool (at most one per concurrent caller is ever kept).
+    pub fn give_workspace(&self, ws: Workspace) {
+        self.pool().push(ws);
+    }
+
+    fn pool(&self) -> std::sync::MutexGuard<'_, Vec<Workspace>> {
+        // nothing panics while the lock is held; a poisoned pool is still a valid list
+        self.workspaces.lock().unwrap_or_else(|e| e.into_inner())
+    }
 }
 
 #[pymethods]
@@ -524,9 +550,7 @@ impl PyModel {
             if let Some(k) = kappa_grad {
                 o.kappa_grad = if k == 0.0 { None } else { Some(k) };
             }
-            Ok(PyModel {
-                inner: Arc::new(self.inner.with_options(o).py()?),
-            })
+            Ok(PyModel::new(self.inner.with_options(o).py()?))
         })
     }
 
@@ -544,11 +568,7 @@ impl PyModel {
 
     /// The same model with new parameter values (same topology: states stay valid).
     fn with_params(&self, params: Vec<f64>) -> PyResult<PyModel> {
-        guard(|| {
-            Ok(PyModel {
-                inner: Arc::new(self.inner.with_params(&params).py()?),
-            })
-        })
+        guard(|| Ok(PyModel::new(self.inner.with_params(&params).py()?)))
     }
 
     /// Default central-path parameter of the gradients (None: exact derivative).

@@ -93,12 +93,14 @@ pub fn step(
         let m = model.inner.clone();
         let mut next = state.inner.clone();
         let report = py.detach(|| {
-            let mut ws = Workspace::new(&m);
+            let mut ws = model.take_workspace();
             let forces = AppliedForces {
                 qfrc: qfrc.as_deref(),
                 xfrc: xfrc.as_deref(),
             };
-            ukemi_engine::step_with(&m, &mut next, &mut ws, &ctrl, &forces)
+            let report = ukemi_engine::step_with(&m, &mut next, &mut ws, &ctrl, &forces);
+            model.give_workspace(ws);
+            report
         });
         let report = report.py()?;
         Ok((next_state(model, next), report.into()))
@@ -142,8 +144,8 @@ pub fn rollout<'py>(
         let mut out = Recorder::new(nstep, nq, nv, nb);
         out.record_state(&m, &s);
         let result = py.detach(|| {
-            let mut ws = Workspace::new(&m);
-            ukemi_engine::rollout(
+            let mut ws = model.take_workspace();
+            let result = ukemi_engine::rollout(
                 &m,
                 &mut s,
                 &mut ws,
@@ -154,7 +156,9 @@ pub fn rollout<'py>(
                     out.record_state(&m, st);
                     out.record_report(r);
                 },
-            )
+            );
+            model.give_workspace(ws);
+            result
         });
         result.py()?;
         let d = out.into_dict(py, nq, nv, nb)?;
