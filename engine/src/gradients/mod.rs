@@ -409,7 +409,9 @@ impl Linearization {
     }
 
     /// Linearise a step that a forward pass already solved from `state` (which must be the
-    /// state that solve started from, rebuilt in `coords`).
+    /// state that solve started from, rebuilt in `coords`), in the workspace `ws` (any
+    /// workspace of `model`: everything read is reinitialised).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn from_stored(
         model: &Model,
         state: &State,
@@ -418,12 +420,12 @@ impl Linearization {
         wrt: Wrt,
         kappa_grad: Option<f64>,
         stored: &StoredSolution,
+        mut ws: Workspace,
     ) -> Result<Linearization> {
         check_kappa(kappa_grad)?;
         let point = Point::new(model, state, coords)?;
         let mut times = PhaseTimes::default();
         let t0 = Instant::now();
-        let mut ws = Workspace::new(model);
         validate_inputs(model, &point.state, &ws, ctrl, &AppliedForces::default())?;
         newton::prepare(
             model,
@@ -523,6 +525,10 @@ impl Linearization {
     /// Residual evaluations spent on the partial derivatives.
     pub fn residual_evaluations(&self) -> usize {
         self.parts.evaluations
+    }
+    /// The workspace the linearisation was computed in, for reuse.
+    pub(crate) fn into_workspace(self) -> Workspace {
+        self.ws
     }
 
     /// The hard next state (what [`crate::step`] returns).

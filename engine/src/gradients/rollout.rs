@@ -153,13 +153,18 @@ pub(crate) fn rollout_vjp_with(
             }
         ],
     };
+    // one workspace for the whole sweep (a robot's is megabytes: allocating it per step cost
+    // as much as the step's back-substitution)
+    let mut spare = Some(ws);
     for k in (0..nstep).rev() {
         let u = &ctrls[k * nu..(k + 1) * nu];
         let stored = &solutions[k];
+        let ws = spare.take().unwrap_or_else(|| Workspace::new(model));
         let mut lin =
-            Linearization::from_stored(model, &states[k], u, coords, wrt, kappa_grad, stored)
+            Linearization::from_stored(model, &states[k], u, coords, wrt, kappa_grad, stored, ws)
                 .map_err(|e| e.at(format!(" (step {k})")))?;
         let a = lin.vjp(model, &adj)?;
+        spare = Some(lin.into_workspace());
         out.ctrls[k * nu..(k + 1) * nu].copy_from_slice(&a.ctrl);
         for (p, g) in out.params.iter_mut().zip(&a.params) {
             *p += g;
