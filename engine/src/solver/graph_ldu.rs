@@ -950,21 +950,27 @@ mod tests {
         check(&p, m, &mut rng);
     }
 
+    /// A random tree on `n` nodes (block sizes 1-6) plus up to `extra` edges, in a random
+    /// elimination order: the pattern and its edges.
+    fn random_graph(n: usize, extra: usize, rng: &mut Rng) -> (BlockPattern, Vec<(usize, usize)>) {
+        let dims: Vec<usize> = (0..n).map(|_| 1 + rng.below(6)).collect();
+        let mut edges: Vec<(usize, usize)> = (1..n).map(|i| (rng.below(i), i)).collect();
+        for _ in 0..extra {
+            let (i, j) = (rng.below(n), rng.below(n));
+            if i != j {
+                edges.push((i, j));
+            }
+        }
+        let mut order: Vec<usize> = (0..n).collect();
+        rng.shuffle(&mut order);
+        (BlockPattern::new(&dims, &edges, &order).unwrap(), edges)
+    }
+
     proptest! {
         #[test]
         fn random_graphs_and_orders(n in 1usize..14, extra in 0usize..8, seed in any::<u64>()) {
             let mut rng = Rng(seed);
-            let dims: Vec<usize> = (0..n).map(|_| 1 + rng.below(6)).collect();
-            let mut edges: Vec<(usize, usize)> = (1..n).map(|i| (rng.below(i), i)).collect();
-            for _ in 0..extra {
-                let (i, j) = (rng.below(n), rng.below(n));
-                if i != j {
-                    edges.push((i, j));
-                }
-            }
-            let mut order: Vec<usize> = (0..n).collect();
-            rng.shuffle(&mut order);
-            let p = BlockPattern::new(&dims, &edges, &order).unwrap();
+            let (p, edges) = random_graph(n, extra, &mut rng);
             // Strict row diagonal dominance: off-diagonal entries are in [-1, 1).
             let shift = p.total_dim() as f64 + 1.0;
             let m = assemble(&p, &edges, shift, &mut rng);
@@ -979,17 +985,7 @@ mod tests {
             n in 2usize..14, extra in 0usize..8, seed in any::<u64>()
         ) {
             let mut rng = Rng(seed);
-            let dims: Vec<usize> = (0..n).map(|_| 1 + rng.below(6)).collect();
-            let mut edges: Vec<(usize, usize)> = (1..n).map(|i| (rng.below(i), i)).collect();
-            for _ in 0..extra {
-                let (i, j) = (rng.below(n), rng.below(n));
-                if i != j {
-                    edges.push((i, j));
-                }
-            }
-            let mut order: Vec<usize> = (0..n).collect();
-            rng.shuffle(&mut order);
-            let p = BlockPattern::new(&dims, &edges, &order).unwrap();
+            let (p, edges) = random_graph(n, extra, &mut rng);
             let shift = p.total_dim() as f64 + 1.0;
             let mut m = assemble(&p, &edges, shift, &mut rng);
             for round in 0..2 {
