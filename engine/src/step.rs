@@ -130,14 +130,26 @@ fn subdivided(
     ctrl: &[f64],
     forces: &AppliedForces,
 ) -> Result<std::result::Result<StepReport, usize>> {
+    subdivided_with(model, state, ws, ctrl, forces, &mut |_, _, _, _, _| {})
+}
+
+/// [`subdivided`], calling `solved(n, i, start, ws, report)` after sub-step `i` of an attempt
+/// with `n` sub-steps converged, with the sub-step's start state and its solution in `ws` (the gradients
+/// keep them to linearise every sub-step; an attempt that fails later is abandoned, and the next
+/// attempt starts again at `i = 0`).
+pub(crate) fn subdivided_with(
+    model: &Model,
+    state: &mut State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+    solved: &mut dyn FnMut(u32, usize, &State, &Workspace, StepReport),
+) -> Result<std::result::Result<StepReport, usize>> {
     let h = model.options.timestep;
     let mut iterations = 0;
     let mut n = 2;
     while n <= model.options.max_subdivisions {
-        let sub = model.with_options(crate::Options {
-            timestep: h / n as f64,
-            ..model.options.clone()
-        })?;
+        let sub = substep_model(model, n)?;
         let mut report = StepReport {
             status: SolveStatus::Converged,
             iterations: 0,
@@ -147,7 +159,7 @@ fn subdivided(
         };
         let mut ends: Vec<State> = Vec::with_capacity(n as usize);
         let mut s = state.clone();
-        for _ in 0..n {
+        for i in 0..n as usize {
             newton::prepare(&sub, &s, ws, ctrl, forces);
             let r = newton::solve(&sub, &s, ws);
             iterations += r.iterations;
@@ -155,6 +167,7 @@ fn subdivided(
                 report.status = r.status;
                 break;
             }
+            solved(n, i, &s, ws, r);
             if r.status == SolveStatus::Acceptable {
                 report.status = SolveStatus::Acceptable;
             }
@@ -176,6 +189,14 @@ fn subdivided(
         n *= 2;
     }
     Ok(Err(iterations))
+}
+
+/// The model a step of `model` is subdivided into: the same with time step `h / n`.
+pub(crate) fn substep_model(model: &Model, n: u32) -> Result<Model> {
+    model.with_options(crate::Options {
+        timestep: model.options.timestep / n as f64,
+        ..model.options.clone()
+    })
 }
 
 /// Step `nstep` times with controls `ctrls` (row-major `(nstep, nu)`), calling `record` after every

@@ -55,14 +55,10 @@ pub fn step(model: &Model, x: &[f64], u: &[f64]) -> Result<Vec<f64>> {
 /// [`crate::SolveStatus::code`] (0 = converged). A step that did not converge returns its last
 /// iterate, flagged, so array programs (under `jit`) can mask it instead of aborting.
 pub fn step_with_status(model: &Model, x: &[f64], u: &[f64]) -> Result<(Vec<f64>, u8)> {
-    use crate::solver::newton;
-    use crate::step::{AppliedForces, validate_inputs};
     let mut s = state_of(model, x)?;
     let mut ws = Workspace::new(model);
-    validate_inputs(model, &s, &ws, u, &AppliedForces::default())?;
-    newton::prepare(model, &s, &mut ws, u, &AppliedForces::default());
-    let report = newton::solve(model, &s, &mut ws);
-    newton::write_state(model, &mut s, &ws);
+    // subdivides a failed step, as `ukemi.step` does
+    let report = crate::step::step(model, &mut s, &mut ws, u)?;
     let mut out = vec![0.0; nx(model)];
     flat_of(model, &s, &mut out);
     Ok((out, report.status.code()))

@@ -39,6 +39,7 @@ pub mod flat;
 mod partials;
 mod rollout;
 mod sparsity;
+mod substeps;
 pub mod tangent;
 
 use std::time::Instant;
@@ -55,6 +56,7 @@ use crate::{Error, Result, ensure};
 pub use partials::PartialsMethod;
 use partials::{Input, Partials};
 pub use rollout::{RolloutAdjoint, rollout_vjp};
+use substeps::{StoredSubsteps, Substeps};
 pub use tangent::Coordinates;
 use tangent::Point;
 
@@ -128,9 +130,10 @@ pub struct PhaseTimes {
     pub backsub: f64,
 }
 
-/// A solved step, linearised at its gradient point: the factored Newton matrix and the
-/// partial derivatives of the residual and the output map.
-pub struct Linearization {
+/// One solve linearised at its gradient point: the factored Newton matrix and the partial
+/// derivatives of the residual and the output map. A step is one of these, or several when it
+/// was subdivided ([`Linearization`]).
+pub(crate) struct SolveLinearization {
     coords: Coordinates,
     next: State,
     report: StepReport,
@@ -174,6 +177,16 @@ fn next_state_into(model: &Model, state: &State, w: &[f64], out: &mut State) {
     out.time = state.time + h;
 }
 
+/// The hard solve of one step from `state` in a fresh workspace; the report says whether it
+/// converged.
+fn solve_hard(model: &Model, state: &State, ctrl: &[f64]) -> Result<(Workspace, StepReport)> {
+    let mut ws = Workspace::new(model);
+    validate_inputs(model, state, &ws, ctrl, &AppliedForces::default())?;
+    newton::prepare(model, state, &mut ws, ctrl, &AppliedForces::default());
+    let report = newton::solve(model, state, &mut ws);
+    Ok((ws, report))
+}
+
 /// Solve one step from `state` and, when `kappa` is given and the model has inequality
 /// constraints, move the solution onto the central path at `kappa`. Returns the hard next
 /// state, the reports, and the workspace holding the gradient point in `ws.w`.
@@ -185,11 +198,21 @@ fn solve_for_gradient(
     times: &mut PhaseTimes,
 ) -> Result<(State, StepReport, Option<Central>, Workspace)> {
     let t0 = Instant::now();
-    let mut ws = Workspace::new(model);
-    validate_inputs(model, state, &ws, ctrl, &AppliedForces::default())?;
-    newton::prepare(model, state, &mut ws, ctrl, &AppliedForces::default());
-    let report = newton::solve(model, state, &mut ws);
+    let (ws, report) = solve_hard(model, state, ctrl)?;
     ensure!(report.status.is_success(), not_converged("step", report));
+    finish_solve(model, state, ws, report, kappa, times, t0)
+}
+
+/// The next state of a converged solve in `ws` and its move to the central path at `kappa`.
+fn finish_solve(
+    model: &Model,
+    state: &State,
+    mut ws: Workspace,
+    report: StepReport,
+    kappa: Option<f64>,
+    times: &mut PhaseTimes,
+    t0: Instant,
+) -> Result<(State, StepReport, Option<Central>, Workspace)> {
     let mut next = state.clone();
     newton::write_state(model, &mut next, &ws);
     let t1 = Instant::now();
@@ -200,7 +223,9 @@ fn solve_for_gradient(
 }
 
 /// [`crate::step`] followed by the move to the central path at `kappa`: the smoothed step map
-/// whose derivatives `kappa_grad = Some(kappa)` returns. Writes the smoothed next state.
+/// whose derivatives `kappa_grad = Some(kappa)` returns. Writes the smoothed next state. A step
+/// whose whole solve fails is reported as not converged (its sub-steps' smoothed maps are
+/// chained along the hard sub-steps, which no single smoothed map of the step reproduces).
 pub fn step_smoothed(
     model: &Model,
     state: &mut State,
@@ -251,6 +276,13 @@ impl StoredSolution {
             report,
         }
     }
+}
+
+/// What a forward pass keeps of a step: its solution, or each sub-step's when it was subdivided.
+#[derive(Clone, Debug)]
+pub(crate) enum StoredStep {
+    Whole(StoredSolution),
+    Substeps(StoredSubsteps),
 }
 
 fn check_kappa(kappa_grad: Option<f64>) -> Result<()> {
@@ -362,52 +394,7 @@ fn solve_central_from(
     Ok(c)
 }
 
-impl Linearization {
-    /// Solve the step from `state` with `ctrl` and linearise it (see the module docs).
-    pub fn new(
-        model: &Model,
-        state: &State,
-        ctrl: &[f64],
-        coords: Coordinates,
-        wrt: Wrt,
-        kappa_grad: Option<f64>,
-    ) -> Result<Linearization> {
-        Self::with_method(
-            model,
-            state,
-            ctrl,
-            coords,
-            wrt,
-            kappa_grad,
-            PartialsMethod::default(),
-        )
-    }
-
-    /// [`Linearization::new`] with the partial derivatives taken by `method`.
-    pub fn with_method(
-        model: &Model,
-        state: &State,
-        ctrl: &[f64],
-        coords: Coordinates,
-        wrt: Wrt,
-        kappa_grad: Option<f64>,
-        method: PartialsMethod,
-    ) -> Result<Linearization> {
-        check_kappa(kappa_grad)?;
-        state.check_model(model)?;
-        let point = Point::new(model, state, coords)?;
-        let mut times = PhaseTimes::default();
-        let (next, report, central, ws) =
-            solve_for_gradient(model, &point.state, ctrl, kappa_grad, &mut times)?;
-        let solved = Solved {
-            next,
-            report,
-            central,
-            ws,
-        };
-        Self::at_solution(model, point, ctrl, wrt, kappa_grad, solved, times, method)
-    }
-
+impl SolveLinearization {
     /// Linearise a step that a forward pass already solved from `state` (which must be the
     /// state that solve started from, rebuilt in `coords`), in the workspace `ws` (any
     /// workspace of `model`: everything read is reinitialised).
@@ -421,8 +408,8 @@ impl Linearization {
         kappa_grad: Option<f64>,
         stored: &StoredSolution,
         mut ws: Workspace,
-    ) -> Result<Linearization> {
-        check_kappa(kappa_grad)?;
+        method: PartialsMethod,
+    ) -> Result<SolveLinearization> {
         let point = Point::new(model, state, coords)?;
         let mut times = PhaseTimes::default();
         let t0 = Instant::now();
@@ -449,7 +436,6 @@ impl Linearization {
             central,
             ws,
         };
-        let method = PartialsMethod::default();
         Self::at_solution(model, point, ctrl, wrt, kappa_grad, solved, times, method)
     }
 
@@ -464,7 +450,7 @@ impl Linearization {
         solved: Solved,
         mut times: PhaseTimes,
         method: PartialsMethod,
-    ) -> Result<Linearization> {
+    ) -> Result<SolveLinearization> {
         let Solved {
             next,
             report,
@@ -507,7 +493,7 @@ impl Linearization {
         let t0 = Instant::now();
         let parts = partials::partials(model, &point, ctrl, &w, &ws.active, &inputs, method)?;
         times.partials = t0.elapsed().as_secs_f64();
-        Ok(Linearization {
+        Ok(SolveLinearization {
             coords,
             next,
             report,
@@ -616,14 +602,7 @@ impl Linearization {
     pub fn vjp(&mut self, model: &Model, adj_next: &[f64]) -> Result<Adjoints> {
         self.check(model)?;
         let ny = self.coords.dim(model);
-        ensure!(
-            adj_next.len() == ny,
-            Error::shape("adjoint_next", &[ny], &[adj_next.len()])
-        );
-        ensure!(
-            adj_next.iter().all(|x| x.is_finite()),
-            Error::input("adjoint_next", adj_next, "must be finite")
-        );
+        check_adjoint(ny, adj_next)?;
         let t0 = Instant::now();
         let parts = &self.parts;
         // λ = R_w⁻ᵀ ∂Y/∂wᵀ a;  adj = ∂Y/∂zᵀ a - ∂R/∂zᵀ λ
@@ -659,17 +638,7 @@ impl Linearization {
         dtheta: &[f64],
     ) -> Result<Vec<f64>> {
         self.check(model)?;
-        for (name, v, n) in [
-            ("dx", dx, self.nx),
-            ("du", du, self.nu),
-            ("dtheta", dtheta, self.np),
-        ] {
-            ensure!(v.len() == n, Error::shape(name, &[n], &[v.len()]));
-            ensure!(
-                v.iter().all(|x| x.is_finite()),
-                Error::input(name, v, "must be finite")
-            );
-        }
+        check_tangents([(dx, self.nx), (du, self.nu), (dtheta, self.np)])?;
         let t = DVector::from_iterator(
             self.nx + self.nu + self.np,
             dx.iter().chain(du).chain(dtheta).copied(),
@@ -694,6 +663,222 @@ impl Linearization {
             }
         }
         Ok(out.iter().copied().collect())
+    }
+}
+
+/// The adjoint of a next state: `ny` finite numbers.
+fn check_adjoint(ny: usize, adj_next: &[f64]) -> Result<()> {
+    ensure!(
+        adj_next.len() == ny,
+        Error::shape("adjoint_next", &[ny], &[adj_next.len()])
+    );
+    ensure!(
+        adj_next.iter().all(|x| x.is_finite()),
+        Error::input("adjoint_next", adj_next, "must be finite")
+    );
+    Ok(())
+}
+
+/// Input tangents `dx`, `du`, `dtheta` of a JVP with their expected lengths.
+fn check_tangents(tangents: [(&[f64], usize); 3]) -> Result<()> {
+    for (name, (v, n)) in ["dx", "du", "dtheta"].into_iter().zip(tangents) {
+        ensure!(v.len() == n, Error::shape(name, &[n], &[v.len()]));
+        ensure!(
+            v.iter().all(|x| x.is_finite()),
+            Error::input(name, v, "must be finite")
+        );
+    }
+    Ok(())
+}
+
+/// A solved step linearised at its gradient point (see the module docs). A step whose whole
+/// solve failed and that [`crate::step`] took as `n` sub-steps (`Options::max_subdivisions`)
+/// is linearised sub-step by sub-step and chained (`substeps.rs`), so its gradients are those
+/// of the step the simulation actually took.
+pub struct Linearization(Kind);
+
+enum Kind {
+    Whole(SolveLinearization),
+    Substeps(Substeps),
+}
+
+impl Linearization {
+    /// Solve the step from `state` with `ctrl` and linearise it (see the module docs).
+    pub fn new(
+        model: &Model,
+        state: &State,
+        ctrl: &[f64],
+        coords: Coordinates,
+        wrt: Wrt,
+        kappa_grad: Option<f64>,
+    ) -> Result<Linearization> {
+        Self::with_method(
+            model,
+            state,
+            ctrl,
+            coords,
+            wrt,
+            kappa_grad,
+            PartialsMethod::default(),
+        )
+    }
+
+    /// [`Linearization::new`] with the partial derivatives taken by `method`.
+    pub fn with_method(
+        model: &Model,
+        state: &State,
+        ctrl: &[f64],
+        coords: Coordinates,
+        wrt: Wrt,
+        kappa_grad: Option<f64>,
+        method: PartialsMethod,
+    ) -> Result<Linearization> {
+        check_kappa(kappa_grad)?;
+        state.check_model(model)?;
+        let point = Point::new(model, state, coords)?;
+        let mut times = PhaseTimes::default();
+        let t0 = Instant::now();
+        let (mut ws, report) = solve_hard(model, &point.state, ctrl)?;
+        if !report.status.is_success() {
+            ensure!(
+                model.options.max_subdivisions > 1,
+                not_converged("step", report)
+            );
+            let stored = substeps::solve(model, &point.state, &mut ws, ctrl, report)?;
+            let lin = Substeps::new(model, point, ctrl, wrt, kappa_grad, &stored, ws, method)?;
+            return Ok(Linearization(Kind::Substeps(lin)));
+        }
+        let (next, report, central, ws) =
+            finish_solve(model, &point.state, ws, report, kappa_grad, &mut times, t0)?;
+        let solved = Solved {
+            next,
+            report,
+            central,
+            ws,
+        };
+        SolveLinearization::at_solution(model, point, ctrl, wrt, kappa_grad, solved, times, method)
+            .map(|l| Linearization(Kind::Whole(l)))
+    }
+
+    /// Linearise a step that a forward pass already solved from `state` (which must be the
+    /// state that solve started from, rebuilt in `coords`), in the workspace `ws` (any
+    /// workspace of `model`: everything read is reinitialised).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn from_stored(
+        model: &Model,
+        state: &State,
+        ctrl: &[f64],
+        coords: Coordinates,
+        wrt: Wrt,
+        kappa_grad: Option<f64>,
+        stored: &StoredStep,
+        ws: Workspace,
+    ) -> Result<Linearization> {
+        check_kappa(kappa_grad)?;
+        let method = PartialsMethod::default();
+        Ok(Linearization(match stored {
+            StoredStep::Whole(sol) => Kind::Whole(SolveLinearization::from_stored(
+                model, state, ctrl, coords, wrt, kappa_grad, sol, ws, method,
+            )?),
+            StoredStep::Substeps(sub) => {
+                let point = Point::new(model, state, coords)?;
+                Kind::Substeps(Substeps::new(
+                    model, point, ctrl, wrt, kappa_grad, sub, ws, method,
+                )?)
+            }
+        }))
+    }
+
+    /// Residual evaluations spent on the partial derivatives.
+    pub fn residual_evaluations(&self) -> usize {
+        match &self.0 {
+            Kind::Whole(l) => l.residual_evaluations(),
+            Kind::Substeps(l) => l.steps().iter().map(|s| s.residual_evaluations()).sum(),
+        }
+    }
+    /// The workspace the linearisation was computed in, for reuse.
+    pub(crate) fn into_workspace(self) -> Workspace {
+        match self.0 {
+            Kind::Whole(l) => l.into_workspace(),
+            Kind::Substeps(l) => l.into_workspace(),
+        }
+    }
+    /// The hard next state (what [`crate::step`] returns).
+    pub fn next_state(&self) -> &State {
+        match &self.0 {
+            Kind::Whole(l) => l.next_state(),
+            Kind::Substeps(l) => l.next_state(),
+        }
+    }
+    /// The step's solver report (`subdivisions > 1` for a subdivided step; its iterations
+    /// include the failed whole-step solve).
+    pub fn report(&self) -> StepReport {
+        match &self.0 {
+            Kind::Whole(l) => l.report(),
+            Kind::Substeps(l) => l.report(),
+        }
+    }
+    /// The report of the move to the central path (`None` without `kappa_grad` or without
+    /// inequality constraints; for a subdivided step the sub-steps' iterations summed).
+    pub fn central_report(&self) -> Option<StepReport> {
+        match &self.0 {
+            Kind::Whole(l) => l.central_report(),
+            Kind::Substeps(l) => l.central_report(),
+        }
+    }
+    /// Whether the move to the central path fell back to the neutral start (the start from the
+    /// hard solution, `Options::central_warm_start`, failed) in any solve; false without a
+    /// central solve.
+    pub fn central_fallback(&self) -> bool {
+        match &self.0 {
+            Kind::Whole(l) => l.central_fallback(),
+            Kind::Substeps(l) => l.steps().iter().any(|s| s.central_fallback()),
+        }
+    }
+    /// Seconds spent in each phase so far (summed over sub-steps).
+    pub fn phase_times(&self) -> PhaseTimes {
+        match &self.0 {
+            Kind::Whole(l) => l.phase_times(),
+            Kind::Substeps(l) => l.phase_times(),
+        }
+    }
+    /// Coordinates of the state tangent.
+    pub fn coordinates(&self) -> Coordinates {
+        match &self.0 {
+            Kind::Whole(l) => l.coordinates(),
+            Kind::Substeps(l) => l.coordinates(),
+        }
+    }
+    /// Full Jacobians (`A`, `B`, `C`; a block has no columns when its input was not selected).
+    pub fn jacobians(&mut self, model: &Model) -> Result<Jacobians> {
+        match &mut self.0 {
+            Kind::Whole(l) => l.jacobians(model),
+            Kind::Substeps(l) => l.jacobians(model),
+        }
+    }
+    /// Vector-Jacobian product: the adjoints of state, control and parameters given the adjoint
+    /// `adj_next` of the next state (tangent coordinates). One transposed back-substitution per
+    /// solve.
+    pub fn vjp(&mut self, model: &Model, adj_next: &[f64]) -> Result<Adjoints> {
+        match &mut self.0 {
+            Kind::Whole(l) => l.vjp(model, adj_next),
+            Kind::Substeps(l) => l.vjp(model, adj_next),
+        }
+    }
+    /// Jacobian-vector product: the tangent of the next state for input tangents `dx` (state),
+    /// `du` (controls) and `dtheta` (parameters); each must match the selected inputs (empty
+    /// when not selected).
+    pub fn jvp(
+        &mut self,
+        model: &Model,
+        dx: &[f64],
+        du: &[f64],
+        dtheta: &[f64],
+    ) -> Result<Vec<f64>> {
+        match &mut self.0 {
+            Kind::Whole(l) => l.jvp(model, dx, du, dtheta),
+            Kind::Substeps(l) => l.jvp(model, dx, du, dtheta),
+        }
     }
 }
 

@@ -1,7 +1,7 @@
 //! Reverse-mode sweep over a whole trajectory: the gradient of a loss on every state with
 //! respect to the initial state, every control and the parameters.
 use super::tangent::{Coordinates, Point};
-use super::{Linearization, StoredSolution, Wrt, not_converged};
+use super::{Linearization, StoredSolution, StoredStep, Wrt, not_converged, substeps};
 use crate::model::Model;
 use crate::solver::newton;
 use crate::state::{State, Workspace};
@@ -32,24 +32,28 @@ pub(crate) fn advance(
 }
 
 /// [`advance`], also returning what the reverse sweep needs to linearise the step without
-/// solving it again (the solution is left in `ws`).
+/// solving it again. A step whose whole solve fails is subdivided as [`crate::step`] does.
 fn advance_stored(
     model: &Model,
     state: &State,
     ctrl: &[f64],
     coords: Coordinates,
     ws: &mut Workspace,
-) -> Result<(State, StoredSolution)> {
+) -> Result<(State, StoredStep)> {
     let mut s = Point::new(model, state, coords)?.state;
     crate::step::validate_inputs(model, &s, ws, ctrl, &AppliedForces::default())?;
     newton::prepare(model, &s, ws, ctrl, &AppliedForces::default());
     let report = newton::solve(model, &s, ws);
+    if report.status.is_success() {
+        newton::write_state(model, &mut s, ws);
+        return Ok((s, StoredStep::Whole(StoredSolution::of(ws, report))));
+    }
     ensure!(
-        report.status.is_success(),
+        model.options.max_subdivisions > 1,
         not_converged("rollout step", report)
     );
-    newton::write_state(model, &mut s, ws);
-    Ok((s, StoredSolution::of(ws, report)))
+    let sub = substeps::solve(model, &s, ws, ctrl, report)?;
+    Ok((sub.next().clone(), StoredStep::Substeps(sub)))
 }
 
 /// Gradient of `L(x_0, …, x_T)` through the rollout from `state` with `ctrls` (row-major

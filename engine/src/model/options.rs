@@ -79,8 +79,8 @@ pub struct Options {
     /// `h |ω|` ≈ 0.1–0.3 whose smooth Newton matrix turns singular, a first impact of many
     /// contacts); at `h / 2` most converge (measured on the 74 failing random stress scenes).
     /// One step of the 10⁵-step random-control hopper needs 16 (`tests/stress` measure).
-    /// Gradients through a subdivided step are not available yet: they report the step as
-    /// not converged.
+    /// Gradients through a subdivided step chain the sub-steps' linearisations
+    /// (`gradients/substeps.rs`).
     pub max_subdivisions: u32,
 }
 
