@@ -154,22 +154,26 @@ def test_round_off_stall_is_acceptable_and_reported(pend):
 
 
 def test_fast_spin_is_reported_never_a_crash(free_body):
-    """|ω| must stay below 2/h (the quaternion step map's domain): a spin past it fails cleanly
-    in one step of h, is taken as sub-steps of h / n while 2n/h exceeds it (max_subdivisions),
-    and fails cleanly beyond that."""
-    s = free_body.make_state(qvel=[0, 0, 0, 0, 0, 250.0])  # 2/h = 200 rad/s
+    """|ω| must stay below √2/h (a step turns a body by at most 90°; beyond, the discrete
+    momentum has a second, spurious root before the step map's domain ends at 2/h): a spin past
+    it fails cleanly in one step of h, is taken as sub-steps of h / n while √2 n/h exceeds it
+    (max_subdivisions), and fails cleanly beyond that."""
+    s = free_body.make_state(qvel=[0, 0, 0, 0, 0, 250.0])  # √2/h = 141 rad/s
     one = free_body.with_options(max_subdivisions=1)
     s1, info = ukemi.step(one, s, on_failure="return")
     assert info.status not in ukemi.SUCCESS_STATUSES
     assert np.all(np.isfinite(s1.qpos))
-    # two sub-steps of h/2 (limit 400 rad/s): the torque-free tumble keeps its energy
+    # between √2/h and 2/h the step map is defined, and the spin is still subdivided
+    _, info = ukemi.step(free_body, free_body.make_state(qvel=[0, 0, 0, 0, 0, 170.0]))
+    assert info.converged and info.subdivisions == 2
+    # two sub-steps of h/2 (limit 283 rad/s): the torque-free tumble keeps its energy
     s2, info = ukemi.step(free_body, s)
     assert info.converged and info.subdivisions == 2
     assert s2.energy() == pytest.approx(s.energy(), rel=1e-10)
-    # 2000 rad/s needs 16 sub-steps (limit 3200 rad/s)
+    # 2000 rad/s needs 16 sub-steps (limit 2263 rad/s; 8 allow 1131)
     s3, info = ukemi.step(free_body, free_body.make_state(qvel=[0, 0, 0, 0, 0, 2000.0]))
     assert info.converged and info.subdivisions == 16
-    # past 32 sub-steps' limit (6400 rad/s): reported, finite
+    # past 32 sub-steps' limit (4525 rad/s): reported, finite
     fast = free_body.make_state(qvel=[0, 0, 0, 0, 0, 10000.0])
     s3, info = ukemi.step(free_body, fast, on_failure="return")
     assert info.status not in ukemi.SUCCESS_STATUSES and info.subdivisions == 1

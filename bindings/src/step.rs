@@ -174,6 +174,7 @@ struct Recorder {
     body_pos: Vec<f64>,
     body_quat: Vec<f64>,
     min_distance: Vec<f64>,
+    energy: Vec<f64>,
     status: Vec<u8>,
     iterations: Vec<i64>,
     residual: Vec<f64>,
@@ -190,6 +191,7 @@ impl Recorder {
             body_pos: Vec::with_capacity(n * nb * 3),
             body_quat: Vec::with_capacity(n * nb * 4),
             min_distance: Vec::with_capacity(n),
+            energy: Vec::with_capacity(n),
             status: Vec::with_capacity(nstep),
             iterations: Vec::with_capacity(nstep),
             residual: Vec::with_capacity(nstep),
@@ -208,6 +210,10 @@ impl Recorder {
         let d = ukemi_engine::contact::signed_distances(m, s);
         self.min_distance
             .push(d.iter().copied().fold(f64::INFINITY, f64::min));
+        // of the simulated state itself: rebuilding a state from qpos/qvel drops the velocity
+        // components the joints' motion subspaces do not span (O(h), see Trajectory.energy)
+        self.energy
+            .push(ukemi_engine::mechanics::total_energy(m, s));
     }
     fn record_report(&mut self, r: &StepReport) {
         self.status.push(r.status.code());
@@ -236,6 +242,7 @@ impl Recorder {
             PyArray1::from_vec(py, self.body_quat).reshape([n, nb, 4])?,
         )?;
         d.set_item("min_distance", PyArray1::from_vec(py, self.min_distance))?;
+        d.set_item("energy", PyArray1::from_vec(py, self.energy))?;
         d.set_item("status", PyArray1::from_vec(py, self.status))?;
         d.set_item("iterations", PyArray1::from_vec(py, self.iterations))?;
         d.set_item("residual", PyArray1::from_vec(py, self.residual))?;

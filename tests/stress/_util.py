@@ -21,12 +21,6 @@ def steps(reduced: int, full: int) -> int:
     return full if FULL else reduced
 
 
-def energies(model, traj) -> np.ndarray:
-    """Discrete total energy of every state of a rollout (J), (T+1,)."""
-    return np.array([model.make_state(qpos=q, qvel=v).energy()
-                     for q, v in zip(traj.qpos, traj.qvel, strict=True)])
-
-
 def failure_summary(traj) -> str:
     bad = ~np.isin(traj.status, ukemi.SUCCESS_STATUSES)
     if not bad.any():
@@ -51,7 +45,7 @@ def violations(model, traj, energy_gain: float = 1e-4, work=None) -> list[str]:
     least = float(traj.min_distance.min())
     if least < PENETRATION_TOL:
         out.append(f"penetration {least:.1e} m at state {int(traj.min_distance.argmin())}")
-    energy = energies(model, traj)
+    energy = traj.energy
     if work is not None:
         energy = energy - work
     gain = float(np.max(energy - energy[0])) / max(1.0, abs(energy[0]))

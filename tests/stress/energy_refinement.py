@@ -15,7 +15,6 @@ import ukemi
 
 from ._measured import RANDOM_SCENES
 from ._random_scenes import random_scene
-from ._util import energies
 
 
 def gains(seed: int, refinements=(1, 2, 4), nsteps: int = 300) -> list[float]:
@@ -26,7 +25,7 @@ def gains(seed: int, refinements=(1, 2, 4), nsteps: int = 300) -> list[float]:
     for n in refinements:
         m = m0.with_options(timestep=m0.timestep / n)
         tr = ukemi.rollout(m, m.make_state(), nsteps=nsteps * n, on_failure="return")
-        e = energies(m, tr)
+        e = tr.energy
         out.append(float((e.max() - e[0]) / max(1.0, abs(e[0]))))
     return out
 

@@ -13,8 +13,9 @@ import ukemi
 
 from ._util import FULL, steps
 
-# measured 2026-11-23 (dt 0.01, 1000 steps): 0.5 -> all converged; 0.9 -> all line_search_failed;
-# 0.99 -> 2 converged, rest max_iterations; 1.01 and 1.5 -> all max_iterations. Flagged, finite.
+# fractions of the step map's domain 2/h; spins past √2/h are subdivided (max_subdivisions).
+# measured 2026-11-23 (dt 0.01, 1000 steps, UKEMI_STRESS=full): every step of every fraction
+# converges. Past 32 sub-steps' reach a spin is flagged, finite (tests/test_api.py).
 FRACTIONS = (0.5, 0.9, 0.99, 1.01, 1.5) if FULL else (0.5, 0.9, 1.5)
 
 
@@ -40,3 +41,17 @@ def test_fast_spin_reported(fraction):
     assert np.all(finite | ~ok), "a converged step returned a non-finite state"
     print(f"spin {fraction:.2f} x 2/h: {int(ok.sum())}/{len(ok)} converged, "
           f"statuses {sorted(set(map(str, tr.status)))}")
+
+
+def test_a_whipping_chain_stays_on_the_physical_branch():
+    """Random scene 673, a 3-link chain whose last link whips past √2/h (141 rad/s at h = 0.01)
+    at step 32. Past √2/h the discrete momentum has a second, spurious root; the solve used to
+    find it (155 rad/s) and gain 7.4 J, a third of the chain's energy, in one step. Now the
+    iterates stay below √2/h, such steps are subdivided, and the energy never rises."""
+    from ._random_scenes import random_scene
+
+    m, _ = random_scene(673)
+    tr = ukemi.rollout(m, m.make_state(), nsteps=60)
+    assert tr.converged
+    assert np.any(tr.subdivisions > 1)
+    assert tr.energy.max() <= tr.energy[0] + 1e-9 * abs(tr.energy[0])
