@@ -32,6 +32,18 @@ pub struct State {
 }
 
 impl State {
+    /// Copy `other` (a state of the same model) into `self` without allocating.
+    pub(crate) fn copy_from(&mut self, other: &State) {
+        self.time = other.time;
+        self.com_pos.copy_from_slice(&other.com_pos);
+        self.quat.copy_from_slice(&other.quat);
+        self.com_linvel.copy_from_slice(&other.com_linvel);
+        self.angvel_b.copy_from_slice(&other.angvel_b);
+        self.joint_impulse.copy_from_slice(&other.joint_impulse);
+        self.ineq_vars.copy_from_slice(&other.ineq_vars);
+        self.topology_id = other.topology_id;
+    }
+
     /// The reference configuration at rest.
     pub fn reference(model: &Model) -> State {
         let n = model.nbody();
@@ -322,6 +334,9 @@ pub struct Workspace {
     pub(crate) delta: Vec<f64>,
     /// Applied impulses per body, `[h(m g + f); h τ_b]` plus joint springs and inputs.
     pub(crate) applied: Vec<[f64; 6]>,
+    /// The state a step started from, kept for its energy check and a retry as sub-steps
+    /// (`step::step_with`) without allocating.
+    pub(crate) start: State,
     /// `∂φ/∂ω` at the trial next configuration, per body.
     pub(crate) dphi: Vec<Matrix3<f64>>,
     pub(crate) next_pose: Vec<Pose>,
@@ -432,6 +447,7 @@ impl Workspace {
             residual: vec![0.0; n],
             delta: vec![0.0; n],
             applied: vec![[0.0; 6]; nb],
+            start: State::reference(model),
             dphi: vec![Matrix3::zeros(); nb],
             next_pose: vec![Pose::world(); nb],
             jac_now: vec![0.0; 12 * t.ncon],

@@ -94,55 +94,81 @@ pub fn step_with(
     validate_inputs(model, state, ws, ctrl, forces)?;
     newton::prepare(model, state, ws, ctrl, forces);
     let report = newton::solve(model, state, ws);
-    let failed = (!report.status.is_success()).then(|| state.clone());
+    ws.start.copy_from(state);
     newton::write_state(model, state, ws);
-    match failed {
-        Some(start) if model.options.max_subdivisions > 1 => {
-            // keep the failed iterate (written above) unless a subdivision succeeds
-            let mut s = start;
-            let sub = subdivided(model, &mut s, ws, ctrl, forces)?;
-            Ok(match sub {
-                Ok(r) => {
-                    *state = s;
-                    StepReport {
-                        iterations: r.iterations + report.iterations,
-                        ..r
-                    }
-                }
-                Err(iterations) => StepReport {
-                    iterations: iterations + report.iterations,
-                    ..report
-                },
-            })
-        }
-        _ => Ok(report),
+    let retry = !report.status.is_success() || gains_energy(model, &ws.start, state, ws);
+    if !retry || model.options.max_subdivisions == 1 {
+        return Ok(report);
     }
+    // keep the whole step (written above) unless a subdivision succeeds
+    let mut s = ws.start.clone();
+    let whole_converged = report.status.is_success();
+    Ok(
+        match subdivided(model, &mut s, ws, ctrl, forces, whole_converged)? {
+            Ok(r) => {
+                *state = s;
+                StepReport {
+                    iterations: r.iterations + report.iterations,
+                    ..r
+                }
+            }
+            Err(iterations) => StepReport {
+                iterations: iterations + report.iterations,
+                ..report
+            },
+        },
+    )
 }
 
-/// A step whose solve failed, taken again as `n` = 2, 4, … ≤ `max_subdivisions` equal
-/// sub-steps from `state` under the same control and forces. On success `state` holds the end
-/// of the last sub-step with the impulses summed over the sub-steps ([`State::add_impulses`])
-/// and the report; otherwise `Err(iterations spent)` and `state` is untouched.
+/// Whether a converged step from `start` to `next` (applied impulses in `ws`) let its
+/// constraint impulses add more kinetic energy than [`crate::Options::energy_guard`] allows:
+/// the mark of a spurious root of the implicit step.
+pub(crate) fn gains_energy(model: &Model, start: &State, next: &State, ws: &Workspace) -> bool {
+    let o = &model.options;
+    if o.energy_guard == 0.0 {
+        return false;
+    }
+    let (work, kinetic) = crate::mechanics::constraint_work(model, start, next, &ws.applied);
+    let mass: f64 = model.bodies.iter().skip(1).map(|b| b.mass).sum();
+    let quantum = mass * o.gravity.norm_squared() * o.timestep * o.timestep;
+    work > o.energy_guard * kinetic + quantum + 1e-12
+}
+
+/// A step whose solve failed (or gained energy, [`gains_energy`]), taken again as `n` = 2, 4, …
+/// ≤ `max_subdivisions` equal sub-steps from `state` under the same control and forces. On
+/// success `state` holds the end of the last sub-step with the impulses summed over the
+/// sub-steps ([`State::add_impulses`]) and the report; otherwise `Err(iterations spent)` and
+/// `state` is untouched.
+///
+/// When the whole step converged but gained energy (`guard`), an attempt also fails when any
+/// sub-step gains energy, and the whole step is kept if none passes. A whole step that failed is
+/// subdivided without the energy check, since a converged step beats a failed one (the shared
+/// humanoid's first step from its `squat` keyframe, where 8 contact candidates start up to
+/// 0.35 mm inside the floor, gains 7.3 J as the contacts push them out, and converges in 8
+/// sub-steps; with the check every attempt failed and so did the step).
 fn subdivided(
     model: &Model,
     state: &mut State,
     ws: &mut Workspace,
     ctrl: &[f64],
     forces: &AppliedForces,
+    guard: bool,
 ) -> Result<std::result::Result<StepReport, usize>> {
-    subdivided_with(model, state, ws, ctrl, forces, &mut |_, _, _, _, _| {})
+    let mut none = |_: u32, _: usize, _: &State, _: &Workspace, _: StepReport| {};
+    subdivided_with(model, state, ws, ctrl, forces, guard, &mut none)
 }
 
 /// [`subdivided`], calling `solved(n, i, start, ws, report)` after sub-step `i` of an attempt
-/// with `n` sub-steps converged, with the sub-step's start state and its solution in `ws` (the gradients
-/// keep them to linearise every sub-step; an attempt that fails later is abandoned, and the next
-/// attempt starts again at `i = 0`).
+/// with `n` sub-steps converged, with the sub-step's start state and its solution in `ws` (the
+/// gradients keep them to linearise every sub-step; an attempt that fails later is abandoned,
+/// and the next attempt starts again at `i = 0`).
 pub(crate) fn subdivided_with(
     model: &Model,
     state: &mut State,
     ws: &mut Workspace,
     ctrl: &[f64],
     forces: &AppliedForces,
+    guard: bool,
     solved: &mut dyn FnMut(u32, usize, &State, &Workspace, StepReport),
 ) -> Result<std::result::Result<StepReport, usize>> {
     let h = model.options.timestep;
@@ -159,12 +185,15 @@ pub(crate) fn subdivided_with(
         };
         let mut ends: Vec<State> = Vec::with_capacity(n as usize);
         let mut s = state.clone();
+        let mut ok = true;
         for i in 0..n as usize {
             newton::prepare(&sub, &s, ws, ctrl, forces);
             let r = newton::solve(&sub, &s, ws);
             iterations += r.iterations;
-            if !r.status.is_success() {
-                report.status = r.status;
+            let mut next = s.clone();
+            newton::write_state(&sub, &mut next, ws);
+            if !r.status.is_success() || (guard && gains_energy(&sub, &s, &next, ws)) {
+                ok = false;
                 break;
             }
             solved(n, i, &s, ws, r);
@@ -173,10 +202,10 @@ pub(crate) fn subdivided_with(
             }
             report.residual = report.residual.max(r.residual);
             report.complementarity = report.complementarity.max(r.complementarity);
-            newton::write_state(&sub, &mut s, ws);
+            s = next;
             ends.push(s.clone());
         }
-        if report.status.is_success() {
+        if ok {
             // the last sub-step's poses, velocities and slacks; the whole step's impulses
             for end in &ends[..ends.len() - 1] {
                 s.add_impulses(model, end);

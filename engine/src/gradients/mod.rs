@@ -739,14 +739,13 @@ impl Linearization {
         let mut times = PhaseTimes::default();
         let t0 = Instant::now();
         let (mut ws, report) = solve_hard(model, &point.state, ctrl)?;
-        if !report.status.is_success() {
-            ensure!(
-                model.options.max_subdivisions > 1,
-                not_converged("step", report)
-            );
-            let stored = substeps::solve(model, &point.state, &mut ws, ctrl, report)?;
-            let lin = Substeps::new(model, point, ctrl, wrt, kappa_grad, &stored, ws, method)?;
-            return Ok(Linearization(Kind::Substeps(lin)));
+        // the same decisions as `crate::step`: a failed or energy-gaining solve is subdivided
+        match substeps::retry(model, &point.state, &mut ws, ctrl, report)? {
+            StoredStep::Substeps(stored) => {
+                let lin = Substeps::new(model, point, ctrl, wrt, kappa_grad, &stored, ws, method)?;
+                return Ok(Linearization(Kind::Substeps(lin)));
+            }
+            StoredStep::Whole(_) => {}
         }
         let (next, report, central, ws) =
             finish_solve(model, &point.state, ws, report, kappa_grad, &mut times, t0)?;

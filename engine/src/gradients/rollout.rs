@@ -1,7 +1,7 @@
 //! Reverse-mode sweep over a whole trajectory: the gradient of a loss on every state with
 //! respect to the initial state, every control and the parameters.
 use super::tangent::{Coordinates, Point};
-use super::{Linearization, StoredSolution, StoredStep, Wrt, not_converged, substeps};
+use super::{Linearization, StoredStep, Wrt, substeps};
 use crate::model::Model;
 use crate::solver::newton;
 use crate::state::{State, Workspace};
@@ -44,16 +44,15 @@ fn advance_stored(
     crate::step::validate_inputs(model, &s, ws, ctrl, &AppliedForces::default())?;
     newton::prepare(model, &s, ws, ctrl, &AppliedForces::default());
     let report = newton::solve(model, &s, ws);
-    if report.status.is_success() {
-        newton::write_state(model, &mut s, ws);
-        return Ok((s, StoredStep::Whole(StoredSolution::of(ws, report))));
+    match substeps::retry(model, &s, ws, ctrl, report)
+        .map_err(|e| e.at(" (rollout step)".to_string()))?
+    {
+        StoredStep::Whole(whole) => {
+            newton::write_state(model, &mut s, ws);
+            Ok((s, StoredStep::Whole(whole)))
+        }
+        StoredStep::Substeps(sub) => Ok((sub.next().clone(), StoredStep::Substeps(sub))),
     }
-    ensure!(
-        model.options.max_subdivisions > 1,
-        not_converged("rollout step", report)
-    );
-    let sub = substeps::solve(model, &s, ws, ctrl, report)?;
-    Ok((sub.next().clone(), StoredStep::Substeps(sub)))
 }
 
 /// Gradient of `L(x_0, …, x_T)` through the rollout from `state` with `ctrls` (row-major

@@ -39,17 +39,21 @@ pub fn qpos_into(model: &Model, state: &State, out: &mut [f64]) {
 
 /// Write `qvel` (length `model.nv`) of `state`.
 pub fn qvel_into(model: &Model, state: &State, out: &mut [f64]) {
-    let mut jac = [0.0; 6 * 12];
     for j in model.joints.iter().filter(|j| !j.is_loop) {
-        let frame = JointFrame::new(j, &pose_of(state, j.parent), &pose_of(state, j.child));
-        let nf = j.nfree();
-        frame.free_jacobian(j, &mut jac[..12 * nf]);
-        let (vp, vc) = (velocity_of(state, j.parent), velocity_of(state, j.child));
-        for r in 0..nf {
-            let row = &jac[12 * r..12 * r + 12];
-            let dot: f64 = (0..6).map(|i| row[i] * vp[i] + row[6 + i] * vc[i]).sum();
-            out[j.qvel_adr + r] = dot;
-        }
+        joint_qvel_into(state, j, &mut out[j.qvel_adr..j.qvel_adr + j.nfree()]);
+    }
+}
+
+/// Write the `nfree` velocity coordinates of joint `j` in `state` (no allocation).
+pub(crate) fn joint_qvel_into(state: &State, j: &super::Joint, out: &mut [f64]) {
+    let mut jac = [0.0; 6 * 12];
+    let frame = JointFrame::new(j, &pose_of(state, j.parent), &pose_of(state, j.child));
+    let nf = j.nfree();
+    frame.free_jacobian(j, &mut jac[..12 * nf]);
+    let (vp, vc) = (velocity_of(state, j.parent), velocity_of(state, j.child));
+    for (r, o) in out.iter_mut().enumerate().take(nf) {
+        let row = &jac[12 * r..12 * r + 12];
+        *o = (0..6).map(|i| row[i] * vp[i] + row[6 + i] * vc[i]).sum();
     }
 }
 
