@@ -327,7 +327,8 @@ pub struct Workspace {
     pub(crate) matrix: BlockMatrix,
     /// Newton unknowns `[v⁺, ω⁺ per moving body; λ per constraint row]`, node layout.
     pub(crate) w: Vec<f64>,
-    /// The best acceptable iterate of a failed attempt, kept while retries try to converge.
+    /// The best acceptable iterate of a failed attempt, kept while retries try to converge; the
+    /// interior-point solution while `solver::saturation` polishes it.
     pub(crate) w_acceptable: Vec<f64>,
     pub(crate) w_trial: Vec<f64>,
     pub(crate) residual: Vec<f64>,
@@ -369,6 +370,10 @@ pub struct Workspace {
     /// Whether each contact candidate takes part in the current step (see
     /// [`crate::Options::activation_margin`]); inactive ones carry no impulse and no solver work.
     pub(crate) active: Vec<bool>,
+    /// Per candidate: the unit direction (contact tangent frame) along which its friction is
+    /// held on the cone's boundary after the interior-point solve (see
+    /// `solver::saturation`); `None` for complementarity rows.
+    pub(crate) saturated: Vec<Option<[f64; 2]>>,
     pub(crate) topology_id: u64,
     /// Nesterov–Todd scaling of each contact's friction-cone pair at the current interior-point
     /// iterate (`None`: unscaled rows), used while `nt_on` (the IPM's directions; the
@@ -390,6 +395,12 @@ impl Workspace {
     /// no impulse (see [`crate::Options::activation_margin`]).
     pub fn active_contacts(&self) -> usize {
         self.active.iter().filter(|&&a| a).count()
+    }
+
+    /// Contacts whose friction the last step held on its cone's boundary, saturated and
+    /// nearly still (the κ = 0 polish of `solver::saturation`).
+    pub fn saturated_contacts(&self) -> usize {
+        self.saturated.iter().filter(|s| s.is_some()).count()
     }
 
     /// Per candidate, whether it took part in the last step (see [`Self::active_contacts`]).
@@ -440,6 +451,7 @@ impl Workspace {
             limit_dtheta: vec![[0.0; 12]; nlim],
             delta_aff: vec![0.0; n],
             active: vec![true; model.ncontact()],
+            saturated: vec![None; model.ncontact()],
             matrix: BlockMatrix::new(&t.pattern),
             w: vec![0.0; n],
             w_trial: vec![0.0; n],

@@ -259,11 +259,13 @@ struct Solved {
 }
 
 /// What a forward pass keeps of a solved step so that it can be linearised without solving it
-/// again: the solution and the contact activation it was solved with.
+/// again: the solution, the contact activation it was solved with and the friction cones it
+/// holds saturated.
 #[derive(Clone, Debug)]
 pub(crate) struct StoredSolution {
     w: Vec<f64>,
     active: Vec<bool>,
+    saturated: Vec<Option<[f64; 2]>>,
     report: StepReport,
 }
 
@@ -273,6 +275,7 @@ impl StoredSolution {
         StoredSolution {
             w: ws.w.clone(),
             active: ws.active.clone(),
+            saturated: ws.saturated.clone(),
             report,
         }
     }
@@ -423,6 +426,7 @@ impl SolveLinearization {
         );
         ws.w.copy_from_slice(&stored.w);
         ws.active.copy_from_slice(&stored.active);
+        ws.saturated.copy_from_slice(&stored.saturated);
         newton::evaluate(model, &point.state, &mut ws, false, 0.0);
         let mut next = point.state.clone();
         newton::write_state(model, &mut next, &ws);

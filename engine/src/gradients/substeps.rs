@@ -88,6 +88,7 @@ pub(crate) fn retry(
             newton::prepare(model, state, ws, ctrl, &AppliedForces::default());
             ws.w.copy_from_slice(&solution.w);
             ws.active.copy_from_slice(&solution.active);
+            ws.saturated.copy_from_slice(&solution.saturated);
             newton::evaluate(model, state, ws, false, 0.0);
             Ok(StoredStep::Whole(solution))
         }

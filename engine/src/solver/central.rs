@@ -63,6 +63,7 @@ pub(crate) fn solve(
     start: Start,
 ) -> StepReport {
     ws.active.fill(true);
+    ws.saturated.fill(None);
     match start {
         Start::Hard => {
             centre(model, state, ws, kappa);
@@ -149,7 +150,15 @@ fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepR
                 complementarity: vio.k,
                 mu,
                 kappa,
-                alpha_aff: cone_search(model, &ws.active, &ws.w, &ws.delta_aff, 1.0, 1.0),
+                alpha_aff: cone_search(
+                    model,
+                    &ws.active,
+                    &ws.saturated,
+                    &ws.w,
+                    &ws.delta_aff,
+                    1.0,
+                    1.0,
+                ),
                 alpha: accepted.unwrap_or(0.0),
                 corrector,
                 condition: f64::NAN,

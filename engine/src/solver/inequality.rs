@@ -40,7 +40,7 @@ fn orthant_pairs(model: ContactModel) -> &'static [(usize, usize, usize)] {
 const LIMIT_PAIRS: [(usize, usize, usize); 2] = [(0, 1, 1), (2, 3, 3)];
 
 /// Second-order cone `(ξ start, η start, first row)` of a nonlinear contact node.
-const SOC: (usize, usize, usize) = (2, 5, 3);
+pub(crate) const SOC: (usize, usize, usize) = (2, 5, 3);
 
 /// Visit every complementarity pair of the step: `f(offset, primal, dual, row, is_soc)` with
 /// node-local indices relative to the node offset. Inactive contact candidates (`active[c]`
@@ -48,6 +48,17 @@ const SOC: (usize, usize, usize) = (2, 5, 3);
 pub(crate) fn for_each_pair(
     model: &Model,
     active: &[bool],
+    f: impl FnMut(usize, usize, usize, usize, bool),
+) {
+    for_each_pair_except(model, active, &[], f)
+}
+
+/// [`for_each_pair`] leaving out the friction cones held saturated (`saturated[c]` set, see
+/// [`super::saturation`]; an empty slice holds none): their rows are equalities.
+pub(crate) fn for_each_pair_except(
+    model: &Model,
+    active: &[bool],
+    saturated: &[Option<[f64; 2]>],
     mut f: impl FnMut(usize, usize, usize, usize, bool),
 ) {
     let t = &model.topology;
@@ -59,7 +70,8 @@ pub(crate) fn for_each_pair(
         for &(p, d, r) in orthant_pairs(contact.model) {
             f(o, p, d, r, false);
         }
-        if contact.model == ContactModel::Nonlinear {
+        let held = saturated.get(c).is_some_and(|s| s.is_some());
+        if contact.model == ContactModel::Nonlinear && !held {
             f(o, SOC.0, SOC.1, SOC.2, true);
         }
     }
@@ -351,7 +363,7 @@ pub(crate) fn evaluate(
         }
     }
     super::tendon::add_rows(model, ws, w, residual);
-    violations(model, &ws.active, w, residual, kappa)
+    violations(model, &ws.active, &ws.saturated, w, residual, kappa)
 }
 
 /// Residual rows of contact `c` and its impulse on the bodies.
@@ -388,7 +400,16 @@ fn contact_rows(model: &Model, ws: &Workspace, c: usize, w: &[f64], residual: &m
             r[0] = x[1] - phi;
             r[1] = x[0] * x[1];
             r[2] = xi[0] - mu * x[0];
-            r[3..6].copy_from_slice(soc_product(&xi, &eta).as_slice());
+            match ws.saturated[c] {
+                None => r[3..6].copy_from_slice(soc_product(&xi, &eta).as_slice()),
+                Some(held) => {
+                    // friction on the cone's boundary along d, η₁ the slip speed along -d
+                    let (d, _) = super::saturation::direction(held, [eta[1], eta[2]]);
+                    r[3] = eta[0] + d[0] * eta[1] + d[1] * eta[2];
+                    r[4] = xi[1] - xi[0] * d[0];
+                    r[5] = xi[2] - xi[0] * d[1];
+                }
+            }
             r[6] = eta[1] - vt(1);
             r[7] = eta[2] - vt(2);
             [x[0], xi[1], xi[2]]
@@ -426,6 +447,7 @@ fn contact_rows(model: &Model, ws: &Workspace, c: usize, w: &[f64], residual: &m
 fn violations(
     model: &Model,
     active: &[bool],
+    saturated: &[Option<[f64; 2]>],
     w: &[f64],
     residual: &mut [f64],
     kappa: f64,
@@ -448,7 +470,7 @@ fn violations(
         }
         residual[o + row] -= kappa;
     };
-    for_each_pair(model, active, |o, p, _, row, soc| {
+    for_each_pair_except(model, active, saturated, |o, p, _, row, soc| {
         is_comp(o, p, row, soc, residual)
     });
     // equality rows = all node rows that are not complementarity rows
@@ -470,6 +492,7 @@ fn violations(
         let o = t.pattern.offset(t.contact_node[c]);
         let rows: &[usize] = match contact.model {
             ContactModel::Impact => &[0],
+            ContactModel::Nonlinear if saturated[c].is_some() => &[0, 2, 3, 4, 5, 6, 7],
             ContactModel::Nonlinear => &[0, 2, 6, 7],
             ContactModel::Linear => &[0, 1, 2, 3, 4, 5],
         };
@@ -513,6 +536,7 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             contact.friction,
             &w[o..o + dim],
             nt,
+            ws.saturated[c],
             &mut ws.matrix.values[diag..diag + dim * dim],
         );
         let [a, b] = t.contact_bodies[c];
@@ -574,8 +598,16 @@ pub(super) fn chain_row(row: &[f64], h: f64, dphi: &Matrix3<f64>) -> [f64; 6] {
 
 /// Diagonal block of a contact node (row-major `dim × dim`), derivatives of its rows w.r.t. its
 /// own variables; with a Nesterov–Todd scaling `nt`, the friction-cone rows are those of the
-/// scaled complementarity `(W ξ) ∘ (W⁻¹ η)` (see [`scale_soc_rows`]).
-fn contact_diag(model: ContactModel, mu: f64, x: &[f64], nt: Option<&NtScaling>, d: &mut [f64]) {
+/// scaled complementarity `(W ξ) ∘ (W⁻¹ η)` (see [`scale_soc_rows`]); with a held saturated
+/// friction direction, the equalities of [`super::saturation`] instead.
+fn contact_diag(
+    model: ContactModel,
+    mu: f64,
+    x: &[f64],
+    nt: Option<&NtScaling>,
+    saturated: Option<[f64; 2]>,
+    d: &mut [f64],
+) {
     let dim = model.dim();
     d.fill(0.0);
     let mut set = |r: usize, c: usize, v: f64| d[r * dim + c] = v;
@@ -602,7 +634,26 @@ fn contact_diag(model: ContactModel, mu: f64, x: &[f64], nt: Option<&NtScaling>,
                 set(4 + i, 6 + i, x[2]);
                 set(6 + i, 6 + i, 1.0); // η₂:₃ - v_t
             }
-            if let Some(nt) = nt {
+            if let Some(held) = saturated {
+                // η₁ + d·η₂:₃ and ξ₂:₃ - ξ₁ d, with d = -η̂₂:₃ turning with a sliding slip:
+                // ∂(ξ₁ d)/∂η₂:₃ = -ξ₁ (I - ddᵀ) / |η₂:₃|
+                let (dir, turn) = super::saturation::direction(held, [x[6], x[7]]);
+                for r in 3..6 {
+                    for k in 2..8 {
+                        set(r, k, 0.0);
+                    }
+                }
+                set(3, 5, 1.0);
+                for i in 0..2 {
+                    set(3, 6 + i, dir[i]);
+                    set(4 + i, 3 + i, 1.0);
+                    set(4 + i, 2, -dir[i]);
+                    for j in 0..2 {
+                        let eye = if i == j { 1.0 } else { 0.0 };
+                        set(4 + i, 6 + j, x[2] * turn * (eye - dir[i] * dir[j]));
+                    }
+                }
+            } else if let Some(nt) = nt {
                 // ∂/∂ξ = Arw(λ) W, ∂/∂η = Arw(λ) W⁻¹
                 let a = arrow(&nt.lambda);
                 let (dx, ds) = (a * nt.w, a * nt.w_inv);
@@ -669,13 +720,14 @@ fn assemble_limits(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
 pub(crate) fn cone_search(
     model: &Model,
     active: &[bool],
+    saturated: &[Option<[f64; 2]>],
     w: &[f64],
     delta: &[f64],
     tau_ort: f64,
     tau_soc: f64,
 ) -> f64 {
     let mut alpha: f64 = 1.0;
-    for_each_pair(model, active, |o, p, d, _, soc| {
+    for_each_pair_except(model, active, saturated, |o, p, d, _, soc| {
         if soc {
             for s in [o + p, o + d] {
                 alpha = alpha.min(soc_step(&v3(w, s), &v3(delta, s), tau_soc));

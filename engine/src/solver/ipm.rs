@@ -108,7 +108,7 @@ pub(crate) fn solve_to(
         }
         ws.matrix.solve_refined(p, &mut ws.delta_aff, REFINE_ROUNDS);
         let act = &ws.active;
-        let alpha_aff = cone_search(model, act, &ws.w, &ws.delta_aff, 1.0, 1.0);
+        let alpha_aff = cone_search(model, act, &ws.saturated, &ws.w, &ws.delta_aff, 1.0, 1.0);
         let mu = mean_complementarity(model, act, &ws.w, &ws.delta_aff, 0.0);
         let mu_aff = mean_complementarity(model, act, &ws.w, &ws.delta_aff, alpha_aff);
         let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
@@ -230,8 +230,16 @@ pub(crate) fn line_search(
     merit: f64,
     (tau_ort, tau_soc): (f64, f64),
 ) -> Option<f64> {
-    let mut alpha = cone_search(model, &ws.active, &ws.w, &ws.delta, tau_ort, tau_soc)
-        .min(spin_limited_step(model, ws));
+    let mut alpha = cone_search(
+        model,
+        &ws.active,
+        &ws.saturated,
+        &ws.w,
+        &ws.delta,
+        tau_ort,
+        tau_soc,
+    )
+    .min(spin_limited_step(model, ws));
     if alpha < 1e-14 {
         // an iterate on a cone's boundary (round-off): no step can help
         return None;

@@ -9,4 +9,5 @@ pub mod graph_ldu;
 pub(crate) mod inequality;
 pub(crate) mod ipm;
 pub(crate) mod newton;
+pub(crate) mod saturation;
 pub(crate) mod tendon;

@@ -142,6 +142,7 @@ pub(crate) fn prepare(
 ) {
     prepare_forces(model, state, ws, ctrl, forces);
     ws.attempt = 0;
+    ws.saturated.fill(None);
     if let Some(trace) = ws.trace.as_mut() {
         trace.clear();
     }
@@ -561,6 +562,9 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
         restart_warm(model, state, ws);
         report = solve_active(model, state, ws);
         report.iterations += iterations;
+    }
+    if report.status.is_success() {
+        report.iterations += super::saturation::polish(model, state, ws);
     }
     report
 }

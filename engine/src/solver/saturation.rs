@@ -1,0 +1,160 @@
+//! Saturated friction held on its cone's boundary: a κ = 0 polish of the interior-point solution.
+//!
+//! On the central path a friction-cone pair satisfies `ξ ∘ η = κe`, so its slip is
+//! `η₂:₃ = -κ ξ₂:₃ / det(ξ)`. While the friction is inside its cone that is O(κ) (a box at rest
+//! on a 45° incline at μ = 1.05 creeps 5.6e-10 m in 1 s). Where sticking needs the whole cone —
+//! the same box at μ = tan 45° — `det(ξ) → 0`, the pair is not strictly complementary, and the
+//! slip the solve leaves is O(√κ): the box crept 1.3e-5 m in 1 s at `kappa_tol` 1e-11, shrinking
+//! only as √`kappa_tol` (1.6e-6 m at 1e-13), and since a saturated contact has no friction left
+//! to stop it, the creep accumulates from step to step.
+//!
+//! So after a converged solve, each friction cone that is saturated (`|ξ₂:₃| ≥ (1 - 1e-3) ξ₁`)
+//! while slipping slowly (`|η₂:₃| < 1e-3 m/s`) is solved again with its cone's complementarity
+//! rows replaced by the equalities of the sliding branch at κ = 0 — friction on the boundary,
+//! against the slip, and slip speed free:
+//!
+//! ```text
+//! ξ₂:₃ = ξ₁ d,   η₁ = -d · η₂:₃,   d = -η₂:₃ / |η₂:₃|  (then ξ ∘ η = 0 exactly)
+//! ```
+//!
+//! Below a slip of 1e-6 m/s the direction is undetermined (a stick exactly on the boundary), and
+//! `d` is held at the direction of the friction the interior-point solve found. Every other
+//! pair, the held contacts' normal pairs `γ s = κ` included, stays on the central path at the
+//! solve's final centring `kappa_tol / undercut` (holding the gap at 0 too makes the four
+//! corners of a flat box a redundant set of constraints). The polished solution is kept only if
+//! it converges to the solver's tolerances, every held contact still pushes (`γ > 0`) and slips
+//! against its friction (`η₁ ≥ -1e-8 m/s`, no slip across `d`); otherwise the interior-point
+//! solution stands. (A box set down exactly touching a 45° incline at μ = tan 45° lifts off to
+//! the central path's gap `κ/γ` in its first step, which tilts it and moves its corners up the
+//! slope by ~6.5e-9 m/s at the default `kappa_tol`, 6.5e-7 at 1e-9: the polish holds there only
+//! at the default tolerances and tighter.)
+//!
+//! The gradients (`kappa_grad = None`) linearise the polished solution with these rows: the
+//! exact derivative of a contact sliding at the limit (its friction turns with the slip, a
+//! lateral stiffness `ξ₁ (I - ddᵀ) / |η₂:₃|`), and a one-sided derivative at a stick on the
+//! boundary (free along the friction, unresisted across it). The interior-point solution's own
+//! derivative differs by the κ-softness of its cone, O(κ/slip²): 2e-4 relative for a box
+//! sliding at 1e-4 m/s. Only friction cones that are saturated and nearly still pay for the
+//! polish; the pyramid (`Linear`) model is not polished.
+use super::inequality::SOC;
+use super::ipm::{fractions_to_boundary, line_search, norm2, solve_negated};
+use super::newton::{assemble, evaluate};
+use crate::contact::ContactModel;
+use crate::model::Model;
+use crate::state::{State, Workspace};
+
+/// A cone counts as saturated when its friction is within this fraction of `μγ`.
+const SATURATION: f64 = 1e-3;
+/// Largest slip speed (m/s) of a contact that is polished.
+const SLIP_MAX: f64 = 1e-3;
+/// Slip (m/s) along the friction, or across it, that a held contact may show.
+const SLIP_TOL: f64 = 1e-8;
+/// Below this slip speed (m/s) a held friction keeps its direction instead of opposing the slip.
+const SLIP_FLOOR: f64 = 1e-6;
+/// Newton iterations of the polish; its rows are linear in the cone variables, so one or two
+/// suffice where the polish is right.
+const MAX_ITER: usize = 6;
+
+/// Polish the converged solution in `ws` (see the module docs); returns the iterations spent.
+/// On return `ws.saturated` marks the contacts held on their cone's boundary (none when the
+/// polish was not needed or not kept).
+pub(crate) fn polish(model: &Model, state: &State, ws: &mut Workspace) -> usize {
+    if !select(model, ws) {
+        return 0;
+    }
+    ws.w_acceptable.copy_from_slice(&ws.w);
+    let o = &model.options;
+    let p = &model.topology.pattern;
+    let kappa = o.kappa_tol / o.undercut;
+    let mut vio = evaluate(model, state, ws, false, 0.0);
+    let mut iterations = 0;
+    let mut converged = false;
+    loop {
+        if vio.r < o.rtol && vio.k < o.kappa_tol {
+            converged = true;
+            break;
+        }
+        if iterations == MAX_ITER {
+            break;
+        }
+        iterations += 1;
+        evaluate(model, state, ws, false, kappa);
+        let merit = norm2(&ws.residual);
+        ws.delta.copy_from_slice(&ws.residual);
+        assemble(model, ws);
+        if ws.matrix.factor(p).is_err() {
+            break;
+        }
+        solve_negated(ws, p);
+        let accepted = line_search(
+            model,
+            state,
+            ws,
+            kappa,
+            merit,
+            fractions_to_boundary(model, vio),
+        );
+        vio = evaluate(model, state, ws, false, 0.0);
+        if accepted.is_none() {
+            break;
+        }
+    }
+    if !(converged && consistent(model, ws)) {
+        std::mem::swap(&mut ws.w, &mut ws.w_acceptable);
+        ws.saturated.fill(None);
+        // the derived quantities (next poses, residual) of the restored solution
+        evaluate(model, state, ws, false, 0.0);
+    }
+    iterations
+}
+
+/// Mark the saturated, slowly slipping friction cones; whether there is any.
+fn select(model: &Model, ws: &mut Workspace) -> bool {
+    let t = &model.topology;
+    let mut any = false;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        ws.saturated[c] = None;
+        if !ws.active[c] || contact.model != ContactModel::Nonlinear {
+            continue;
+        }
+        let o = t.pattern.offset(t.contact_node[c]);
+        let (xi, eta) = (
+            &ws.w[o + SOC.0..o + SOC.0 + 3],
+            &ws.w[o + SOC.1..o + SOC.1 + 3],
+        );
+        let friction = xi[1].hypot(xi[2]);
+        if xi[0] > 0.0 && friction >= (1.0 - SATURATION) * xi[0] && eta[1].hypot(eta[2]) < SLIP_MAX
+        {
+            ws.saturated[c] = Some([xi[1] / friction, xi[2] / friction]);
+            any = true;
+        }
+    }
+    any
+}
+
+/// Whether every held contact pushes (`γ > 0`) and slips against its friction direction `d`
+/// (`η₂:₃ = -η₁ d` with `η₁ ≥ 0`), to [`SLIP_TOL`] (the velocities are solved to `rtol`, their
+/// slip is meaningful far below this).
+fn consistent(model: &Model, ws: &Workspace) -> bool {
+    let t = &model.topology;
+    ws.saturated.iter().enumerate().all(|(c, held)| {
+        let Some(held) = *held else { return true };
+        let o = t.pattern.offset(t.contact_node[c]);
+        let (speed, slip) = (ws.w[o + SOC.1], [ws.w[o + SOC.1 + 1], ws.w[o + SOC.1 + 2]]);
+        let (d, _) = direction(held, slip);
+        let across = (slip[0] + speed * d[0]).hypot(slip[1] + speed * d[1]);
+        ws.w[o] > 0.0 && speed >= -SLIP_TOL && across <= SLIP_TOL + SATURATION * speed.abs()
+    })
+}
+
+/// The direction a held friction acts along at `slip` (contact tangent frame): against the slip
+/// when it is faster than [`SLIP_FLOOR`], else the `held` one; with the rate `1/|slip|` at which
+/// it turns with the slip (0 when held).
+pub(crate) fn direction(held: [f64; 2], slip: [f64; 2]) -> ([f64; 2], f64) {
+    let speed = slip[0].hypot(slip[1]);
+    if speed > SLIP_FLOOR {
+        ([-slip[0] / speed, -slip[1] / speed], 1.0 / speed)
+    } else {
+        (held, 0.0)
+    }
+}
