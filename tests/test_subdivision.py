@@ -23,7 +23,12 @@ SEED, STEP = 73, 86
 
 
 def test_failed_step_is_subdivided_and_reported():
-    m, s = _scene_before_failure(SEED, STEP)
+    m, simulated = _scene_before_failure(SEED, STEP)
+    # velocities set by the user count as the interval of whatever step takes them, so from
+    # such a state the sub-steps are exactly steps of the model at h / 2. (A simulated state's
+    # velocities span the step h that made them, and enter the first sub-step as the previous
+    # interval of a variable step: `cargo test --release -p ukemi-engine --lib subdivided`.)
+    s = m.make_state(qpos=simulated.qpos, qvel=simulated.qvel)
     _, whole = ukemi.step(m.with_options(max_subdivisions=1), s, None, on_failure="return")
     assert not whole.converged and whole.subdivisions == 1
 

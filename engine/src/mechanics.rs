@@ -19,7 +19,7 @@ pub fn linear_momentum(model: &Model, state: &State) -> Vector3<f64> {
 
 /// Discrete angular momentum about the world origin, world frame (kg·m²/s).
 pub fn angular_momentum(model: &Model, state: &State) -> Vector3<f64> {
-    let h = model.options.timestep;
+    let h = state.interval(model.options.timestep);
     (1..model.nbody())
         .map(|b| {
             let body = &model.bodies[b];
@@ -85,7 +85,7 @@ pub fn potential_energy(model: &Model, state: &State) -> f64 {
 /// energy of the trapezoidal discrete Lagrangian, which the integrator keeps bounded (J).
 /// Joint springs are not included; see [`spring_energy`].
 pub fn total_energy(model: &Model, state: &State) -> f64 {
-    let h = model.options.timestep;
+    let h = state.interval(model.options.timestep);
     let g = model.options.gravity;
     let pe: f64 = (1..model.nbody())
         .map(|b| {

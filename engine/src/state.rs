@@ -28,10 +28,26 @@ pub struct State {
     /// Interior-point variables of every contact candidate, then every joint limit, then every
     /// tendon limit (their node layouts, see `solver::inequality`), from the last step.
     pub ineq_vars: Vec<f64>,
+    /// Length of the time interval whose midpoint velocities the state holds, as a fraction of
+    /// the time step of the model that steps it: 1 after a step, `1/n` after a step taken as `n`
+    /// sub-steps (see `step`); `None` before the first step (velocities set by the user count
+    /// as the interval of whatever step takes them: a spin set past the step map's domain `2/h`
+    /// is then taken as sub-steps of its own length). Setting velocities (`set_minimal`) keeps
+    /// it, so the gradients' rebuilt states step as the states they came from. The discrete momentum a step starts from is that
+    /// interval's. A fraction rather than seconds, so that the derivative with respect to the
+    /// time step (a model parameter) sees both intervals scale with it; a state stepped by a
+    /// model with another time step counts its interval in that model's.
+    pub(crate) interval: Option<f64>,
     pub(crate) topology_id: u64,
 }
 
 impl State {
+    /// The length of the interval of the state's velocities ([`State::interval`]) when stepped
+    /// with time step `h`.
+    pub(crate) fn interval(&self, h: f64) -> f64 {
+        h * self.interval.unwrap_or(1.0)
+    }
+
     /// Copy `other` (a state of the same model) into `self` without allocating.
     pub(crate) fn copy_from(&mut self, other: &State) {
         self.time = other.time;
@@ -41,6 +57,7 @@ impl State {
         self.angvel_b.copy_from_slice(&other.angvel_b);
         self.joint_impulse.copy_from_slice(&other.joint_impulse);
         self.ineq_vars.copy_from_slice(&other.ineq_vars);
+        self.interval = other.interval;
         self.topology_id = other.topology_id;
     }
 
@@ -55,6 +72,7 @@ impl State {
             angvel_b: vec![0.0; 3 * n],
             joint_impulse: vec![0.0; model.ncon()],
             ineq_vars: Vec::new(),
+            interval: None,
             topology_id: model.topology_id(),
         };
         s.ineq_vars = neutral_ineq_vars(model);

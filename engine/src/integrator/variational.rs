@@ -44,16 +44,20 @@ pub fn angular_momentum_backward(
 }
 
 /// Momentum part of the body residual (no applied or constraint impulses): `[r_lin; r_rot]`.
+/// `h_prev` is the length of the previous interval (the one `v⁻, ω⁻` are the midpoint
+/// velocities of), `h` that of the step: the discrete Euler-Lagrange equations of a variable
+/// step equate the backward momentum of the one with the forward momentum of the other (the
+/// applied impulses then act over `(h_prev + h) / 2`).
 pub fn momentum_residual(
     mass: f64,
     inertia: &Matrix3<f64>,
-    h: f64,
+    (h_prev, h): (f64, f64),
     (linvel_prev, angvel_prev): (&Vector3<f64>, &Vector3<f64>),
     (linvel, angvel): (&Vector3<f64>, &Vector3<f64>),
 ) -> (Vector3<f64>, Vector3<f64>) {
     let lin = (linvel - linvel_prev) * mass;
     let rot = angular_momentum_forward(inertia, angvel, h)
-        - angular_momentum_backward(inertia, angvel_prev, h);
+        - angular_momentum_backward(inertia, angvel_prev, h_prev);
     (lin, rot)
 }
 

@@ -130,6 +130,15 @@ pub(crate) fn prepare_smooth_forces(
     }
     super::actuation::add_site_wrenches(model, state, ws);
     super::coupling::prepare(model, state, ws);
+    // the applied forces act at the current configuration over half of each adjacent interval:
+    // `(h_prev + h) / 2` (the variable-step discrete Euler-Lagrange equations)
+    let h = model.options.timestep;
+    if state.interval(h) != h {
+        let scale = 0.5 * (1.0 + state.interval(h) / h);
+        for a in ws.applied.iter_mut() {
+            a.iter_mut().for_each(|x| *x *= scale);
+        }
+    }
 }
 
 /// Evaluate applied impulses and current-configuration Jacobians; set the initial iterate.
@@ -282,6 +291,7 @@ pub(crate) fn evaluate_in(
 /// Body and joint rows (everything but the inequality nodes).
 fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], residual: &mut [f64]) {
     let h = model.options.timestep;
+    let h_prev = state.interval(h);
     let Workspace {
         next_pose,
         applied,
@@ -298,8 +308,13 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
             quat: now.quat * quat::step_map(&om, h),
         };
         let prev = state.velocity(b);
-        let (lin, rot) =
-            momentum_residual(body.mass, &body.inertia, h, (&prev.0, &prev.1), (&v, &om));
+        let (lin, rot) = momentum_residual(
+            body.mass,
+            &body.inertia,
+            (h_prev, h),
+            (&prev.0, &prev.1),
+            (&v, &om),
+        );
         let o = body_slot(model, b);
         for i in 0..3 {
             residual[o + i] = lin[i] - applied[b][i];
@@ -712,6 +727,7 @@ pub(crate) fn write_state(model: &Model, state: &mut State, ws: &Workspace) {
     if model.topology.has_cones {
         super::inequality::store(model, state, ws);
     }
+    state.interval = Some(1.0);
     state.time += model.options.timestep;
 }
 
