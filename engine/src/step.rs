@@ -358,10 +358,19 @@ mod tests {
                 // take this step as n sub-steps, as `step` does after a failed solve
                 let n = 2u32.pow(1 + k % 2);
                 let mut none = |_: u32, _: usize, _: &State, _: &Workspace, _: StepReport| {};
-                let (end, _, gained) =
-                    attempt(&model, &state, &mut ws, &[], &forces, n, true, &mut none, &mut 0)
-                        .unwrap()
-                        .unwrap();
+                let (end, _, gained) = attempt(
+                    &model,
+                    &state,
+                    &mut ws,
+                    &[],
+                    &forces,
+                    n,
+                    true,
+                    &mut none,
+                    &mut 0,
+                )
+                .unwrap()
+                .unwrap();
                 assert!(!gained);
                 state = end;
             } else {

@@ -37,3 +37,14 @@ def check(seed: int, nsteps: int = NSTEPS):
 def test_random_scene(seed):
     m, desc, tr, gain = check(seed)
     assert_stable(m, tr, energy_gain=gain)
+
+
+def test_a_stall_next_to_a_sliding_cone_is_rescued():
+    """Random scene 225 (a capsule on a planar joint landing flat while it spins) stalled in
+    step 51 at every subdivision (max_iterations; measured 2026-11-23). A failed solve is now
+    retried with its saturated friction cones held on the sliding branch at κ = 0
+    (engine/src/solver/saturation.rs, `rescue`): the step converges, in sub-steps."""
+    m, _ = random_scene(225)
+    tr = ukemi.rollout(m, m.make_state(), nsteps=52, on_failure="return")
+    assert tr.converged
+    assert_stable(m, tr, energy_gain=MECHANISM_ENERGY_GAIN)

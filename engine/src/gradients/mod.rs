@@ -701,6 +701,8 @@ fn check_tangents(tangents: [(&[f64], usize); 3]) -> Result<()> {
 /// of the step the simulation actually took.
 pub struct Linearization(Kind);
 
+// both variants hold a workspace inline (~1.4 KB); one linearisation lives at a time
+#[allow(clippy::large_enum_variant)]
 enum Kind {
     Whole(SolveLinearization),
     Substeps(Substeps),

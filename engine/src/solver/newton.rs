@@ -580,6 +580,15 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     }
     if report.status.is_success() {
         report.iterations += super::saturation::polish(model, state, ws);
+    } else {
+        let (iterations, kept) = super::saturation::rescue(model, state, ws);
+        report.iterations += iterations;
+        if kept {
+            let vio = evaluate(model, state, ws, false, 0.0);
+            report.status = SolveStatus::Converged;
+            report.residual = vio.r;
+            report.complementarity = vio.k;
+        }
     }
     report
 }

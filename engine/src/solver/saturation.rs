@@ -59,8 +59,22 @@ const MAX_ITER: usize = 6;
 /// On return `ws.saturated` marks the contacts held on their cone's boundary (none when the
 /// polish was not needed or not kept).
 pub(crate) fn polish(model: &Model, state: &State, ws: &mut Workspace) -> usize {
-    if !select(model, ws) {
-        return 0;
+    hold(model, state, ws, SLIP_MAX).0
+}
+
+/// A solve that failed, retried from its last iterate with every saturated friction cone held on
+/// the sliding branch (any slip speed): a cone sliding at the limit is strictly complementary at
+/// κ = 0, where its held rows are well conditioned, while the interior-point iterates can stall
+/// next to it (measured: random scenes 351, 762, 955 stalled with a sliding cone's
+/// complementarity stuck at 1e-7..1e-5). Returns the iterations spent and whether the held
+/// solution converged and is consistent (then it is in `ws`; else `ws` is as before).
+pub(crate) fn rescue(model: &Model, state: &State, ws: &mut Workspace) -> (usize, bool) {
+    hold(model, state, ws, f64::INFINITY)
+}
+
+fn hold(model: &Model, state: &State, ws: &mut Workspace, slip_max: f64) -> (usize, bool) {
+    if !select(model, ws, slip_max) {
+        return (0, false);
     }
     ws.w_acceptable.copy_from_slice(&ws.w);
     let o = &model.options;
@@ -99,17 +113,18 @@ pub(crate) fn polish(model: &Model, state: &State, ws: &mut Workspace) -> usize 
             break;
         }
     }
-    if !(converged && consistent(model, ws)) {
+    let kept = converged && consistent(model, ws);
+    if !kept {
         std::mem::swap(&mut ws.w, &mut ws.w_acceptable);
         ws.saturated.fill(None);
         // the derived quantities (next poses, residual) of the restored solution
         evaluate(model, state, ws, false, 0.0);
     }
-    iterations
+    (iterations, kept)
 }
 
 /// Mark the saturated, slowly slipping friction cones; whether there is any.
-fn select(model: &Model, ws: &mut Workspace) -> bool {
+fn select(model: &Model, ws: &mut Workspace, slip_max: f64) -> bool {
     let t = &model.topology;
     let mut any = false;
     for (c, contact) in model.contacts.iter().enumerate() {
@@ -123,7 +138,7 @@ fn select(model: &Model, ws: &mut Workspace) -> bool {
             &ws.w[o + SOC.1..o + SOC.1 + 3],
         );
         let friction = xi[1].hypot(xi[2]);
-        if xi[0] > 0.0 && friction >= (1.0 - SATURATION) * xi[0] && eta[1].hypot(eta[2]) < SLIP_MAX
+        if xi[0] > 0.0 && friction >= (1.0 - SATURATION) * xi[0] && eta[1].hypot(eta[2]) < slip_max
         {
             ws.saturated[c] = Some([xi[1] / friction, xi[2] / friction]);
             any = true;
