@@ -580,9 +580,60 @@ impl PyModel {
         self.inner.options.kappa_grad
     }
 
-    /// State at the reference pose, or at the given minimal coordinates.
-    #[pyo3(signature = (qpos=None, qvel=None, key=None))]
+    /// State at the reference pose, or at the given minimal coordinates. `velocity` says what
+    /// `qvel` is: `"midpoint"` (default) the velocity over the step before the state, as the
+    /// state stores it; `"instant"` the velocity at the state's time, MuJoCo's convention (the
+    /// midpoint velocity is found by the discrete Legendre transform, a few steps of the model
+    /// under zero control: `engine/src/legendre.rs`).
+    #[pyo3(signature = (qpos=None, qvel=None, key=None, velocity="midpoint"))]
     fn make_state(
+        &self,
+        py: Python<'_>,
+        qpos: Option<Vec<f64>>,
+        qvel: Option<Vec<f64>>,
+        key: Option<String>,
+        velocity: &str,
+    ) -> PyResult<PyState> {
+        let instant = match velocity {
+            "midpoint" => false,
+            "instant" => true,
+            other => {
+                return Err(crate::errors::InputError::new_err(format!(
+                    "invalid input: `velocity` = {other:?}: must be \"midpoint\" or \"instant\""
+                )));
+            }
+        };
+        let mut state = self.make_state_midpoint(qpos, qvel, key)?;
+        if instant {
+            let m = &self.inner;
+            let v = ukemi_engine::qvel(m, &state.inner);
+            let zero = vec![0.0; m.nu()];
+            let inner = &mut state.inner;
+            guard(|| {
+                py.detach(|| ukemi_engine::set_instant_velocity(m, inner, &v, &zero))
+                    .py()
+            })?;
+        }
+        Ok(state)
+    }
+
+    fn __repr__(&self) -> String {
+        let m = &self.inner;
+        format!(
+            "ukemi.Model(nbody={}, njoint={}, nq={}, nv={}, nu={}, timestep={})",
+            m.nbody(),
+            m.njoint(),
+            m.nq,
+            m.nv,
+            m.nu(),
+            m.options.timestep
+        )
+    }
+}
+
+impl PyModel {
+    /// [`PyModel::make_state`] with `qvel` as the stored midpoint velocity.
+    fn make_state_midpoint(
         &self,
         qpos: Option<Vec<f64>>,
         qvel: Option<Vec<f64>>,
@@ -615,18 +666,5 @@ impl PyModel {
                 inner: state,
             })
         })
-    }
-
-    fn __repr__(&self) -> String {
-        let m = &self.inner;
-        format!(
-            "ukemi.Model(nbody={}, njoint={}, nq={}, nv={}, nu={}, timestep={})",
-            m.nbody(),
-            m.njoint(),
-            m.nq,
-            m.nv,
-            m.nu(),
-            m.options.timestep
-        )
     }
 }

@@ -31,6 +31,7 @@ pub mod error;
 pub mod gradients;
 pub mod integrator;
 pub mod joints;
+pub mod legendre;
 pub mod math;
 pub mod mechanics;
 pub mod mjcf;
@@ -48,6 +49,7 @@ pub use gradients::{
 };
 pub use joints::coordinates::{qpos, qvel, set_minimal};
 pub use joints::{Joint, JointKind};
+pub use legendre::set_instant_velocity;
 pub use model::{
     ActuatorSpec, BodySpec, GeomSpec, JointSpec, Keyframe, Model, ModelBuilder, Options,
 };

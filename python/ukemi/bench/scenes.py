@@ -62,8 +62,11 @@ def run_slide(engine: str, variant: str, dt: float, tol: float | None, duration:
     qvel = [*(SLIDE_V0 * SLIDE_DIR), 0, 0, 0]
     if engine == "ukemi":
         m = slide_ukemi(dt, variant, tol)
+        # the velocity at t = 0, as MuJoCo's qvel (the default would be the midpoint velocity
+        # of the step before, which starts the slide half a step late: -v0 h / 2)
+        s0 = m.make_state(qvel=qvel, velocity="instant")
         t0 = time.perf_counter()
-        tr = ukemi.rollout(m, m.make_state(qvel=qvel), nsteps=n, on_failure="return")
+        tr = ukemi.rollout(m, s0, nsteps=n, on_failure="return")
         wall = time.perf_counter() - t0
         out = _slide_metrics(tr.body_pos[-1, 1] - tr.body_pos[0, 1], float(tr.min_distance.min()))
         return {**out, **_solver_stats(tr), "wall": wall, "sim": n * dt}
