@@ -26,7 +26,8 @@ const MAX_ITER: usize = 50;
 /// Set the velocities of `state` (at its configuration) so that its velocity at `state.time`,
 /// the mean of the midpoint velocities before and after it, is `qvel0` (MuJoCo's `qvel`
 /// convention) under controls `ctrl`. Returns the number of steps taken to find them; an error
-/// if a step fails or the iteration does not reach round-off (`state` is then untouched).
+/// if a step fails or the iteration does not reach round-off (`state` is then untouched). The
+/// steps are solved to the default tolerances or the model's, whichever are tighter.
 pub fn set_instant_velocity(
     model: &Model,
     state: &mut State,
@@ -44,6 +45,14 @@ pub fn set_instant_velocity(
             "must be finite",
         ));
     }
+    // the steps are solved at least as tightly as the defaults: at a loose tolerance (1e-2) the
+    // solution jitters with the start velocity and the iteration cannot settle
+    let defaults = crate::Options::default();
+    let model = &model.with_options(crate::Options {
+        rtol: model.options.rtol.min(defaults.rtol),
+        kappa_tol: model.options.kappa_tol.min(defaults.kappa_tol),
+        ..model.options.clone()
+    })?;
     let qpos = crate::joints::coordinates::qpos(model, state);
     let scale = 1.0 + qvel0.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     let mut ws = Workspace::new(model);

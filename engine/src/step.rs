@@ -143,7 +143,7 @@ pub(crate) fn gains_energy(model: &Model, start: &State, next: &State, ws: &Work
 /// The first subdivision whose sub-steps all converge without gaining energy is taken. When the
 /// whole step converged but gained energy (`guard`), the whole step is kept if none does. A
 /// whole step that failed falls back to the first subdivision that converged although it gained
-/// energy, since a converged step beats a failed one (the shared humanoid's first step from its
+/// energy (after trying one finer subdivision), since a converged step beats a failed one (the shared humanoid's first step from its
 /// `squat` keyframe, where 8 contact candidates start up to 0.35 mm inside the floor, gains
 /// 7.3 J as the contacts push them out, and converges in 8 sub-steps). Taking the first
 /// converged subdivision outright instead kept spurious roots: random scene 34's step 30 ended
@@ -157,13 +157,15 @@ fn subdivided(
     guard: bool,
 ) -> Result<std::result::Result<StepReport, usize>> {
     let mut none = |_: u32, _: usize, _: &State, _: &Workspace, _: StepReport| {};
-    subdivided_with(model, state, ws, ctrl, forces, guard, &mut none)
+    subdivided_with(model, state, ws, ctrl, forces, guard, false, &mut none)
 }
 
 /// [`subdivided`], calling `solved(n, i, start, ws, report)` after sub-step `i` of an attempt
 /// with `n` sub-steps converged, with the sub-step's start state and its solution in `ws` (the
 /// gradients keep them to linearise every sub-step; an attempt that is not taken is abandoned,
-/// and the next attempt starts again at `i = 0`; the attempt taken is the last one reported).
+/// and the next attempt starts again at `i = 0`). With `replay`, a fallback attempt that is
+/// taken is solved again so that it is the last one reported.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn subdivided_with(
     model: &Model,
     state: &mut State,
@@ -171,10 +173,11 @@ pub(crate) fn subdivided_with(
     ctrl: &[f64],
     forces: &AppliedForces,
     guard: bool,
+    replay: bool,
     solved: &mut dyn FnMut(u32, usize, &State, &Workspace, StepReport),
 ) -> Result<std::result::Result<StepReport, usize>> {
     let mut iterations = 0;
-    let mut fallback = None;
+    let mut fallback: Option<(u32, State, StepReport)> = None;
     let mut n = 2;
     while n <= model.options.max_subdivisions {
         match attempt(
@@ -195,16 +198,24 @@ pub(crate) fn subdivided_with(
                     ..report
                 }));
             }
-            Some((_, _, true)) => {
-                fallback.get_or_insert(n);
-            }
-            None => {}
+            Some((end, report, true)) if fallback.is_none() => fallback = Some((n, end, report)),
+            _ => {}
+        }
+        // past a converged fallback, one finer subdivision is tried for an energy-consistent
+        // step (the shared humanoid's squat start gains energy at every subdivision: trying all
+        // of them doubled its cost)
+        if fallback.as_ref().is_some_and(|(m, _, _)| n >= 2 * m) {
+            break;
         }
         n *= 2;
     }
-    if let Some(n) = fallback {
-        // taken again, so that `solved` saw its sub-steps last (the solves are deterministic)
-        if let Some((end, report, _)) = attempt(
+    let Some((n, end, report)) = fallback else {
+        return Ok(Err(iterations));
+    };
+    let mut end = end;
+    if replay {
+        // reported to `solved` last: taken again (the solves are deterministic)
+        let again = attempt(
             model,
             state,
             ws,
@@ -214,15 +225,16 @@ pub(crate) fn subdivided_with(
             false,
             solved,
             &mut iterations,
-        )? {
-            *state = end;
-            return Ok(Ok(StepReport {
-                iterations,
-                ..report
-            }));
+        )?;
+        if let Some((same, _, _)) = again {
+            end = same;
         }
     }
-    Ok(Err(iterations))
+    *state = end;
+    Ok(Ok(StepReport {
+        iterations,
+        ..report
+    }))
 }
 
 /// One attempt of [`subdivided_with`]: the step from `state` as `n` sub-steps. `None` when a

@@ -114,6 +114,7 @@ pub(crate) fn solve(
         ctrl,
         &AppliedForces::default(),
         failed.status.is_success(),
+        true,
         &mut |_, i, start, ws, report| {
             if i == 0 {
                 starts.clear();
