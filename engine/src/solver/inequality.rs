@@ -497,7 +497,7 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
         let (o, dim) = (t.pattern.offset(n), contact.model.dim());
         let diag = t.pattern.block(n, n).unwrap_or(0);
         let active = ws.active[c];
-        ws.matrix.set_skipped(n, !active);
+        ws.matrix.set_skipped(&t.pattern, n, !active);
         if !active {
             // frozen variables: identity diagonal block, zero couplings (left zero by
             // `BlockMatrix::zero`), so the factorisation can skip the node

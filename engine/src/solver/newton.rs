@@ -394,7 +394,7 @@ fn add_damper_residual(
 pub(crate) fn assemble(model: &Model, ws: &mut Workspace) {
     let h = model.options.timestep;
     let t = &model.topology;
-    ws.matrix.zero();
+    ws.matrix.zero(&t.pattern);
     for (b, body) in model.bodies.iter().enumerate().skip(1) {
         let (_, om) = w_body(model, &ws.w, b);
         ws.dphi[b] = quat::step_map_dphi_domega(&om, h);
