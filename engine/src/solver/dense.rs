@@ -181,11 +181,17 @@ pub fn lu_solve_right(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], m: usi
 ///
 /// Works on whole (contiguous) rows of `X`, i.e. all right-hand sides at once.
 pub fn lu_solve_left_matrix(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], ncols: usize) {
-    sized!(ncols => lu_solve_left_matrix_sized(lu, n, piv, x, ncols))
+    // pivots of contacts (8) and bodies (6) are the common ones: both sizes literal there
+    match n {
+        8 => sized!(ncols => lu_solve_left_matrix_sized(lu, 8, piv, x, ncols)),
+        6 => sized!(ncols => lu_solve_left_matrix_sized(lu, 6, piv, x, ncols)),
+        _ => sized!(ncols => lu_solve_left_matrix_sized(lu, n, piv, x, ncols)),
+    }
 }
 
 #[inline(always)]
 fn lu_solve_left_matrix_sized(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], ncols: usize) {
+    let (lu, x) = (&lu[..n * n], &mut x[..n * ncols]);
     // X := P X
     for (c, &r) in piv[..n].iter().enumerate() {
         swap_rows(x, ncols, c, r);
@@ -226,7 +232,11 @@ fn gemm_sub_sized(c: &mut [f64], a: &[f64], b: &[f64], m: usize, k: usize, n: us
     for (c_row, a_row) in c[..m * n].chunks_exact_mut(n).zip(a.chunks_exact(k)) {
         // c_i,: -= Σ_p a_ip b_p,:
         for (&a_ip, b_row) in a_row.iter().zip(b.chunks_exact(n)) {
-            axpy_neg(c_row, a_ip, b_row);
+            // a contact's coupling to a body has 3 nonzero columns of 8: skip the zero ones
+            // (their products are zeros; only a zero's sign or a NaN in `b` could differ)
+            if a_ip != 0.0 {
+                axpy_neg(c_row, a_ip, b_row);
+            }
         }
     }
 }
