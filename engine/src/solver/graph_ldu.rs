@@ -109,6 +109,9 @@ pub struct BlockPattern {
     nbrs: Vec<Nbr>,
     /// Schur updates of all steps, concatenated.
     updates: Vec<Update>,
+    /// Per stored block: whether it is a fill block (zero as assembled, written only by the
+    /// Schur updates).
+    fill: Vec<bool>,
 }
 
 impl BlockPattern {
@@ -127,6 +130,7 @@ impl BlockPattern {
         }
         let pos = positions(order, n)?;
         let mut adj = adjacency(n, edges)?;
+        let original = adj.clone();
         let nfill = eliminate(&mut adj, order, &pos);
         let mut offsets = Vec::with_capacity(n + 1);
         let mut total = 0;
@@ -148,8 +152,13 @@ impl BlockPattern {
             steps: Vec::with_capacity(n),
             nbrs: Vec::new(),
             updates: Vec::new(),
+            fill: Vec::new(),
         };
         p.layout(&adj);
+        p.fill = (0..n)
+            .flat_map(|i| (p.row_ptr[i]..p.row_ptr[i + 1]).map(move |idx| (i, idx)))
+            .map(|(i, idx)| p.cols[idx] != i && !original[i].contains(&p.cols[idx]))
+            .collect();
         p.plan(&adj, &pos)?;
         Ok(p)
     }
@@ -414,6 +423,10 @@ struct Live {
     blocks: Vec<(usize, usize)>,
     /// Their row ranges (adjacent nodes merged).
     rows: Vec<Range<usize>>,
+    /// Scratch of the factorisation: positions among a step's later neighbours `i` with
+    /// `A_ik ≠ 0` and `j` with `U_kj ≠ 0`.
+    update_rows: Vec<usize>,
+    update_cols: Vec<usize>,
 }
 
 impl BlockMatrix {
@@ -432,6 +445,8 @@ impl BlockMatrix {
                 steps: (0..p.steps.len()).collect(),
                 blocks: Vec::with_capacity(p.nblocks()),
                 rows: Vec::with_capacity(p.nnodes()),
+                update_rows: Vec::with_capacity(p.nnodes()),
+                update_cols: Vec::with_capacity(p.nnodes()),
             }),
         }
     }
@@ -473,14 +488,11 @@ impl BlockMatrix {
     /// identity blocks of skipped nodes (see [`Self::set_skipped`]): with hundreds of inactive
     /// contact candidates, clearing their blocks every iteration cost more than the solve.
     pub fn zero(&mut self, p: &BlockPattern) {
-        if !self.skip.contains(&true) {
-            self.values.fill(0.0);
-            return;
-        }
         for i in (0..p.nnodes()).filter(|&i| !self.skip[i]) {
             for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
                 let j = p.cols[idx];
-                if !self.skip[j] {
+                // a fill block holds values only if the last factorisation's updates wrote it
+                if !self.skip[j] && (!p.fill[idx] || self.nz[idx]) {
                     let len = p.dims[i] * p.dims[j];
                     self.values[p.vals[idx]..p.vals[idx] + len].fill(0.0);
                 }
@@ -628,7 +640,8 @@ impl BlockMatrix {
             }
             for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
                 let j = p.cols[idx];
-                if self.skip[i] || self.skip[j] {
+                if self.skip[i] || self.skip[j] || p.fill[idx] {
+                    // fill blocks are zero as assembled (see `Self::values`)
                     self.nz[idx] = i == j;
                     continue;
                 }
@@ -660,11 +673,25 @@ impl BlockMatrix {
                 // U_kj = D_k⁻¹ A_kj
                 lu_solve_left_matrix(d, dk, piv, akj, nb.dim);
             }
-            for u in &p.updates[s.updates.clone()] {
-                let [ij_id, ik_id, kj_id] = u.ids;
-                if !(self.nz[ik_id] && self.nz[kj_id]) {
-                    continue;
+            // A_ij -= A_ik U_kj only for later neighbours i with A_ik ≠ 0 and j with U_kj ≠ 0
+            // (a body with many fill neighbours from inactive contacts has few of each)
+            let nbrs = &p.nbrs[s.nbrs.clone()];
+            let (rows, cols) = (&mut self.live.update_rows, &mut self.live.update_cols);
+            rows.clear();
+            cols.clear();
+            for (a, nb) in nbrs.iter().enumerate() {
+                if self.nz[nb.jk_id] {
+                    rows.push(a);
                 }
+                if self.nz[nb.kj_id] {
+                    cols.push(a);
+                }
+            }
+            let pairs = rows
+                .iter()
+                .flat_map(|&a| cols.iter().map(move |&b| a * nbrs.len() + b));
+            for u in pairs.map(|ab| &p.updates[s.updates.start + ab]) {
+                let ij_id = u.ids[0];
                 self.nz[ij_id] = true;
                 let ij = u.ij..u.ij + u.di * u.dj;
                 let (ik, kj) = (u.ik..u.ik + u.di * dk, u.kj..u.kj + dk * u.dj);
