@@ -221,7 +221,12 @@ fn lu_solve_left_matrix_sized(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64]
 
 /// `C -= A · B` with `C` `m × n`, `A` `m × k`, `B` `k × n` (all row-major).
 pub fn gemm_sub(c: &mut [f64], a: &[f64], b: &[f64], m: usize, k: usize, n: usize) {
-    sized!(n => gemm_sub_sized(c, a, b, m, k, n))
+    // updates through contacts (8) and bodies (6) are the common ones: both sizes literal
+    match k {
+        8 => sized!(n => gemm_sub_sized(c, a, b, m, 8, n)),
+        6 => sized!(n => gemm_sub_sized(c, a, b, m, 6, n)),
+        _ => sized!(n => gemm_sub_sized(c, a, b, m, k, n)),
+    }
 }
 
 #[inline(always)]
