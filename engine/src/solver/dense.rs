@@ -63,22 +63,40 @@ pub fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> bool {
 #[inline(always)]
 fn lu_factor_sized(a: &mut [f64], n: usize, piv: &mut [usize]) -> bool {
     debug_assert!(a.len() >= n * n && piv.len() >= n);
-    for c in 0..n {
-        let p = pivot_row(a, n, c);
-        let pivot = a[p * n + c];
-        if pivot == 0.0 || !pivot.is_finite() {
-            return false;
-        }
-        piv[c] = p;
-        swap_rows(a, n, c, p);
-        let (top, bottom) = a.split_at_mut((c + 1) * n);
-        let row_c = &top[c * n..];
-        for row_r in bottom[..(n - c - 1) * n].chunks_exact_mut(n) {
-            // l_rc = a_rc / u_cc;  a_r,c+1.. -= l_rc * u_c,c+1..
-            let l = row_r[c] / pivot;
-            row_r[c] = l;
-            axpy_neg(&mut row_r[c + 1..], l, &row_c[c + 1..n]);
-        }
+    let a = &mut a[..n * n];
+    if n > 8 {
+        return (0..n).all(|c| lu_column(a, n, c, piv));
+    }
+    // the column loop unrolled as well, so that with `n` a literal every row operation has a
+    // literal length (the 8×8 contact blocks took ~2800 instructions with the loop)
+    macro_rules! columns {
+        ($($c:literal)*) => {
+            $(if $c < n && !lu_column(a, n, $c, piv) {
+                return false;
+            })*
+        };
+    }
+    columns!(0 1 2 3 4 5 6 7);
+    true
+}
+
+/// Elimination step `c` of [`lu_factor`]: pivot, swap, update the rows below.
+#[inline(always)]
+fn lu_column(a: &mut [f64], n: usize, c: usize, piv: &mut [usize]) -> bool {
+    let p = pivot_row(a, n, c);
+    let pivot = a[p * n + c];
+    if pivot == 0.0 || !pivot.is_finite() {
+        return false;
+    }
+    piv[c] = p;
+    swap_rows(a, n, c, p);
+    let (top, bottom) = a.split_at_mut((c + 1) * n);
+    let row_c = &top[c * n..];
+    for row_r in bottom[..(n - c - 1) * n].chunks_exact_mut(n) {
+        // l_rc = a_rc / u_cc;  a_r,c+1.. -= l_rc * u_c,c+1..
+        let l = row_r[c] / pivot;
+        row_r[c] = l;
+        axpy_neg(&mut row_r[c + 1..], l, &row_c[c + 1..n]);
     }
     true
 }
