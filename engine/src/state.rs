@@ -331,10 +331,8 @@ pub struct Workspace {
     pub(crate) w_acceptable: Vec<f64>,
     pub(crate) w_trial: Vec<f64>,
     pub(crate) residual: Vec<f64>,
-    /// The residual at κ = 0 of the last `newton::evaluate_kept` and its violation metrics:
-    /// the interior-point method moves it to another κ (`newton::recentre`) instead of
-    /// evaluating the same iterate again (boxed: a workspace is moved around by value).
-    pub(crate) kept: Box<(Vec<f64>, crate::solver::newton::Violation)>,
+    /// The last `newton::evaluate_kept` (boxed: a workspace is moved around by value).
+    pub(crate) kept: Box<crate::solver::newton::Kept>,
     pub(crate) delta: Vec<f64>,
     /// Applied impulses per body, `[h(m g + f); h τ_b]` plus joint springs and inputs.
     pub(crate) applied: Vec<[f64; 6]>,
@@ -449,13 +447,7 @@ impl Workspace {
             w_trial: vec![0.0; n],
             w_acceptable: vec![0.0; n],
             residual: vec![0.0; n],
-            kept: Box::new((
-                vec![0.0; n],
-                crate::solver::newton::Violation {
-                    r: f64::NAN,
-                    k: f64::NAN,
-                },
-            )),
+            kept: Box::new(crate::solver::newton::Kept::new(n)),
             delta: vec![0.0; n],
             applied: vec![[0.0; 6]; nb],
             start: State::reference(model),

@@ -73,9 +73,9 @@ pub(crate) fn solve_to(
         let done = match central {
             None => vio.r < o.rtol && vio.k < o.kappa_tol,
             Some(k) => {
-                recentre(model, ws, k);
+                recentre(model, state, ws, k);
                 let c = centred_norm(ws);
-                recentre(model, ws, 0.0);
+                recentre(model, state, ws, 0.0);
                 c < o.rtol
             }
         };
@@ -114,7 +114,7 @@ pub(crate) fn solve_to(
         let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
         let kappa = (sigma * mu).max(floor);
         // corrector: Δ = -R⁻¹ (r(w, κ) + Δb_aff ∘ Δc_aff), reusing the factorisation
-        recentre(model, ws, kappa);
+        recentre(model, state, ws, kappa);
         scale_soc_rows(model, ws, false, kappa);
         let merit = norm2(&ws.residual);
         ws.delta.copy_from_slice(&ws.residual);
@@ -128,7 +128,7 @@ pub(crate) fn solve_to(
                 // the second-order term can spoil descent far from the central path: fall back to
                 // the plain Newton direction of r(w, κ), a descent direction of its norm
                 corrector = false;
-                evaluate_kept(model, state, ws, false, kappa);
+                recentre(model, state, ws, kappa);
                 scale_soc_rows(model, ws, false, kappa);
                 ws.delta.copy_from_slice(&ws.residual);
                 solve_negated(ws, p);
@@ -148,11 +148,8 @@ pub(crate) fn solve_to(
                 condition,
             });
         }
-        // the line search evaluated the accepted iterate last; a failed one left `w` as it was
-        vio = match accepted {
-            Some(_) => recentre(model, ws, 0.0),
-            None => evaluate_kept(model, state, ws, false, 0.0),
-        };
+        // (the line search evaluated an accepted iterate last: no evaluation then)
+        vio = recentre(model, state, ws, 0.0);
         if accepted.is_none() {
             report.status = SolveStatus::LineSearchFailed;
             break;
