@@ -350,6 +350,8 @@ pub struct Workspace {
     pub(crate) w_acceptable: Vec<f64>,
     pub(crate) w_trial: Vec<f64>,
     pub(crate) residual: Vec<f64>,
+    /// The last `newton::evaluate_kept` (boxed: a workspace is moved around by value).
+    pub(crate) kept: Box<crate::solver::newton::Kept>,
     pub(crate) delta: Vec<f64>,
     /// Applied impulses per body, `[h(m g + f); h τ_b]` plus joint springs and inputs.
     pub(crate) applied: Vec<[f64; 6]>,
@@ -475,6 +477,7 @@ impl Workspace {
             w_trial: vec![0.0; n],
             w_acceptable: vec![0.0; n],
             residual: vec![0.0; n],
+            kept: Box::new(crate::solver::newton::Kept::new(n)),
             delta: vec![0.0; n],
             applied: vec![[0.0; 6]; nb],
             start: State::reference(model),

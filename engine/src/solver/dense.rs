@@ -6,34 +6,103 @@
 //! pivoting and stores its pivots LAPACK-style: at step `c`, row `c` was swapped with
 //! row `piv[c] >= c`, so that `P A = L U` with `L` unit lower triangular.
 
+/// Evaluate `$call` with the size variable `$n` bound to a literal when it is one of the block
+/// sizes of the Newton matrix (1 to 8: bodies 6, joints 1-5, contacts 2 or 8, limits 4), so
+/// that the kernel inlined into each arm is compiled for that size (unrolled loops, no bounds
+/// checks) and runs the same floating-point operations in the same order as the generic one.
+/// Measured on the shared A1: the kernels ran ~9 instructions per flop with runtime sizes.
+macro_rules! sized {
+    ($n:ident => $call:expr) => {
+        match $n {
+            1 => {
+                let $n = 1;
+                $call
+            }
+            2 => {
+                let $n = 2;
+                $call
+            }
+            3 => {
+                let $n = 3;
+                $call
+            }
+            4 => {
+                let $n = 4;
+                $call
+            }
+            5 => {
+                let $n = 5;
+                $call
+            }
+            6 => {
+                let $n = 6;
+                $call
+            }
+            7 => {
+                let $n = 7;
+                $call
+            }
+            8 => {
+                let $n = 8;
+                $call
+            }
+            _ => $call,
+        }
+    };
+}
+
 /// In-place LU factorisation with partial pivoting of the `n × n` row-major matrix `a`.
 ///
 /// On return `a` holds `L` (strictly below the diagonal, unit diagonal implied) and `U`
 /// (on and above the diagonal), and `piv[c]` is the row swapped with row `c` at step `c`.
 /// Returns `false` (leaving `a` partially factored) if a pivot is exactly zero or not finite.
 pub fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> bool {
+    sized!(n => lu_factor_sized(a, n, piv))
+}
+
+#[inline(always)]
+fn lu_factor_sized(a: &mut [f64], n: usize, piv: &mut [usize]) -> bool {
     debug_assert!(a.len() >= n * n && piv.len() >= n);
-    for c in 0..n {
-        let p = pivot_row(a, n, c);
-        let pivot = a[p * n + c];
-        if pivot == 0.0 || !pivot.is_finite() {
-            return false;
-        }
-        piv[c] = p;
-        swap_rows(a, n, c, p);
-        let (top, bottom) = a.split_at_mut((c + 1) * n);
-        let row_c = &top[c * n..];
-        for row_r in bottom[..(n - c - 1) * n].chunks_exact_mut(n) {
-            // l_rc = a_rc / u_cc;  a_r,c+1.. -= l_rc * u_c,c+1..
-            let l = row_r[c] / pivot;
-            row_r[c] = l;
-            axpy_neg(&mut row_r[c + 1..], l, &row_c[c + 1..n]);
-        }
+    let a = &mut a[..n * n];
+    if n > 8 {
+        return (0..n).all(|c| lu_column(a, n, c, piv));
+    }
+    // the column loop unrolled as well, so that with `n` a literal every row operation has a
+    // literal length (the 8×8 contact blocks took ~2800 instructions with the loop)
+    macro_rules! columns {
+        ($($c:literal)*) => {
+            $(if $c < n && !lu_column(a, n, $c, piv) {
+                return false;
+            })*
+        };
+    }
+    columns!(0 1 2 3 4 5 6 7);
+    true
+}
+
+/// Elimination step `c` of [`lu_factor`]: pivot, swap, update the rows below.
+#[inline(always)]
+fn lu_column(a: &mut [f64], n: usize, c: usize, piv: &mut [usize]) -> bool {
+    let p = pivot_row(a, n, c);
+    let pivot = a[p * n + c];
+    if pivot == 0.0 || !pivot.is_finite() {
+        return false;
+    }
+    piv[c] = p;
+    swap_rows(a, n, c, p);
+    let (top, bottom) = a.split_at_mut((c + 1) * n);
+    let row_c = &top[c * n..];
+    for row_r in bottom[..(n - c - 1) * n].chunks_exact_mut(n) {
+        // l_rc = a_rc / u_cc;  a_r,c+1.. -= l_rc * u_c,c+1..
+        let l = row_r[c] / pivot;
+        row_r[c] = l;
+        axpy_neg(&mut row_r[c + 1..], l, &row_c[c + 1..n]);
     }
     true
 }
 
 /// Row index `>= c` of the largest `|a[r][c]|` (a NaN entry is always selected).
+#[inline(always)]
 fn pivot_row(a: &[f64], n: usize, c: usize) -> usize {
     let mut best = c;
     let mut best_abs = a[c * n + c].abs();
@@ -48,6 +117,7 @@ fn pivot_row(a: &[f64], n: usize, c: usize) -> usize {
 }
 
 /// Swap rows `i` and `j` (each `ncols` long) of a row-major matrix.
+#[inline(always)]
 fn swap_rows(a: &mut [f64], ncols: usize, i: usize, j: usize) {
     if i == j {
         return;
@@ -58,6 +128,7 @@ fn swap_rows(a: &mut [f64], ncols: usize, i: usize, j: usize) {
 }
 
 /// `y -= alpha * x`, elementwise over the common length.
+#[inline(always)]
 fn axpy_neg(y: &mut [f64], alpha: f64, x: &[f64]) {
     for (yi, xi) in y.iter_mut().zip(x) {
         *yi -= alpha * xi;
@@ -66,6 +137,12 @@ fn axpy_neg(y: &mut [f64], alpha: f64, x: &[f64]) {
 
 /// Solve `A x = b` in place, given the output of [`lu_factor`] for `A`.
 pub fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    sized!(n => lu_solve_sized(lu, n, piv, b))
+}
+
+#[inline(always)]
+fn lu_solve_sized(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    let (lu, b) = (&lu[..n * n], &mut b[..n]);
     // b := P b
     for (c, &r) in piv[..n].iter().enumerate() {
         b.swap(c, r);
@@ -84,6 +161,12 @@ pub fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 
 /// Solve `Aᵀ x = b` in place, given the output of [`lu_factor`] for `A`.
 pub fn lu_solve_transpose(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    sized!(n => lu_solve_transpose_sized(lu, n, piv, b))
+}
+
+#[inline(always)]
+fn lu_solve_transpose_sized(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    let (lu, b) = (&lu[..n * n], &mut b[..n]);
     // Aᵀ = Uᵀ Lᵀ P;  Uᵀ w = b (forward)
     for i in 0..n {
         let s: f64 = (0..i).map(|k| lu[k * n + i] * b[k]).sum();
@@ -116,6 +199,17 @@ pub fn lu_solve_right(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], m: usi
 ///
 /// Works on whole (contiguous) rows of `X`, i.e. all right-hand sides at once.
 pub fn lu_solve_left_matrix(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], ncols: usize) {
+    // pivots of contacts (8) and bodies (6) are the common ones: both sizes literal there
+    match n {
+        8 => sized!(ncols => lu_solve_left_matrix_sized(lu, 8, piv, x, ncols)),
+        6 => sized!(ncols => lu_solve_left_matrix_sized(lu, 6, piv, x, ncols)),
+        _ => sized!(ncols => lu_solve_left_matrix_sized(lu, n, piv, x, ncols)),
+    }
+}
+
+#[inline(always)]
+fn lu_solve_left_matrix_sized(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], ncols: usize) {
+    let (lu, x) = (&lu[..n * n], &mut x[..n * ncols]);
     // X := P X
     for (c, &r) in piv[..n].iter().enumerate() {
         swap_rows(x, ncols, c, r);
@@ -145,22 +239,42 @@ pub fn lu_solve_left_matrix(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64], 
 
 /// `C -= A · B` with `C` `m × n`, `A` `m × k`, `B` `k × n` (all row-major).
 pub fn gemm_sub(c: &mut [f64], a: &[f64], b: &[f64], m: usize, k: usize, n: usize) {
+    // updates through contacts (8) and bodies (6) are the common ones: both sizes literal
+    match k {
+        8 => sized!(n => gemm_sub_sized(c, a, b, m, 8, n)),
+        6 => sized!(n => gemm_sub_sized(c, a, b, m, 6, n)),
+        _ => sized!(n => gemm_sub_sized(c, a, b, m, k, n)),
+    }
+}
+
+#[inline(always)]
+fn gemm_sub_sized(c: &mut [f64], a: &[f64], b: &[f64], m: usize, k: usize, n: usize) {
     if n == 0 || k == 0 {
         return;
     }
     for (c_row, a_row) in c[..m * n].chunks_exact_mut(n).zip(a.chunks_exact(k)) {
         // c_i,: -= Σ_p a_ip b_p,:
         for (&a_ip, b_row) in a_row.iter().zip(b.chunks_exact(n)) {
-            axpy_neg(c_row, a_ip, b_row);
+            // a contact's coupling to a body has 3 nonzero columns of 8: skip the zero ones
+            // (their products are zeros; only a zero's sign or a NaN in `b` could differ)
+            if a_ip != 0.0 {
+                axpy_neg(c_row, a_ip, b_row);
+            }
         }
     }
 }
 
 /// `y -= A x` with `A` `m × n` row-major, `y` of length `m`, `x` of length `n`.
 pub fn gemv_sub(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
+    sized!(n => gemv_sub_sized(y, a, x, m, n))
+}
+
+#[inline(always)]
+fn gemv_sub_sized(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
     if n == 0 {
         return;
     }
+    let x = &x[..n];
     for (yi, a_row) in y[..m].iter_mut().zip(a.chunks_exact(n)) {
         *yi -= dot(a_row, x);
     }
@@ -168,9 +282,15 @@ pub fn gemv_sub(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
 
 /// `y += A x` with `A` `m × n` row-major, `y` of length `m`, `x` of length `n`.
 pub fn gemv_add(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
+    sized!(n => gemv_add_sized(y, a, x, m, n))
+}
+
+#[inline(always)]
+fn gemv_add_sized(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
     if n == 0 {
         return;
     }
+    let x = &x[..n];
     for (yi, a_row) in y[..m].iter_mut().zip(a.chunks_exact(n)) {
         *yi += dot(a_row, x);
     }
@@ -178,6 +298,11 @@ pub fn gemv_add(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
 
 /// `y -= Aᵀ x` with `A` `m × n` row-major, `y` of length `n`, `x` of length `m`.
 pub fn gemv_t_sub(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
+    sized!(n => gemv_t_sub_sized(y, a, x, m, n))
+}
+
+#[inline(always)]
+fn gemv_t_sub_sized(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
     if n == 0 {
         return;
     }
@@ -188,6 +313,7 @@ pub fn gemv_t_sub(y: &mut [f64], a: &[f64], x: &[f64], m: usize, n: usize) {
 }
 
 /// Dot product over the common length.
+#[inline(always)]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

@@ -517,19 +517,15 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
     let t = &model.topology;
     for (c, contact) in model.contacts.iter().enumerate() {
         let n = t.contact_node[c];
-        let (o, dim) = (t.pattern.offset(n), contact.model.dim());
-        let diag = t.pattern.block(n, n).unwrap_or(0);
         let active = ws.active[c];
-        ws.matrix.set_skipped(n, !active);
+        // frozen variables: `set_skipped` keeps the identity row and column of the node, so
+        // the factorisation can skip it
+        ws.matrix.set_skipped(&t.pattern, n, !active);
         if !active {
-            // frozen variables: identity diagonal block, zero couplings (left zero by
-            // `BlockMatrix::zero`), so the factorisation can skip the node
-            let d = &mut ws.matrix.values[diag..diag + dim * dim];
-            for i in 0..dim {
-                d[i * dim + i] = 1.0;
-            }
             continue;
         }
+        let (o, dim) = (t.pattern.offset(n), contact.model.dim());
+        let diag = t.pattern.block(n, n).unwrap_or(0);
         let nt = if ws.nt_on { ws.nt[c].as_ref() } else { None };
         contact_diag(
             contact.model,

@@ -13,7 +13,7 @@
 use super::inequality::{
     add_mehrotra_correction, cone_search, mean_complementarity, scale_soc_rows, update_scalings,
 };
-use super::newton::{Violation, assemble, evaluate, spin_limited_step};
+use super::newton::{Violation, assemble, evaluate, evaluate_kept, recentre, spin_limited_step};
 use crate::model::Model;
 use crate::state::{IterationRecord, SolveStatus, State, StepReport, Workspace};
 
@@ -57,7 +57,7 @@ pub(crate) fn solve_to(
     let p = &model.topology.pattern;
     let floor = central.unwrap_or(o.kappa_tol / o.undercut);
     ws.nt.fill(None);
-    let mut vio = evaluate(model, state, ws, false, 0.0);
+    let mut vio = evaluate_kept(model, state, ws, false, 0.0);
     let mut report = StepReport {
         status: SolveStatus::MaxIterations,
         iterations: 0,
@@ -73,9 +73,9 @@ pub(crate) fn solve_to(
         let done = match central {
             None => vio.r < o.rtol && vio.k < o.kappa_tol,
             Some(k) => {
-                evaluate(model, state, ws, false, k);
+                recentre(model, state, ws, k);
                 let c = centred_norm(ws);
-                evaluate(model, state, ws, false, 0.0);
+                recentre(model, state, ws, 0.0);
                 c < o.rtol
             }
         };
@@ -114,7 +114,7 @@ pub(crate) fn solve_to(
         let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
         let kappa = (sigma * mu).max(floor);
         // corrector: Δ = -R⁻¹ (r(w, κ) + Δb_aff ∘ Δc_aff), reusing the factorisation
-        evaluate(model, state, ws, false, kappa);
+        recentre(model, state, ws, kappa);
         scale_soc_rows(model, ws, false, kappa);
         let merit = norm2(&ws.residual);
         ws.delta.copy_from_slice(&ws.residual);
@@ -128,7 +128,7 @@ pub(crate) fn solve_to(
                 // the second-order term can spoil descent far from the central path: fall back to
                 // the plain Newton direction of r(w, κ), a descent direction of its norm
                 corrector = false;
-                evaluate(model, state, ws, false, kappa);
+                recentre(model, state, ws, kappa);
                 scale_soc_rows(model, ws, false, kappa);
                 ws.delta.copy_from_slice(&ws.residual);
                 solve_negated(ws, p);
@@ -148,7 +148,8 @@ pub(crate) fn solve_to(
                 condition,
             });
         }
-        vio = evaluate(model, state, ws, false, 0.0);
+        // (the line search evaluated an accepted iterate last: no evaluation then)
+        vio = recentre(model, state, ws, 0.0);
         if accepted.is_none() {
             report.status = SolveStatus::LineSearchFailed;
             break;
@@ -248,7 +249,7 @@ pub(crate) fn line_search(
         for i in 0..ws.w.len() {
             ws.w_trial[i] = ws.w[i] + alpha * ws.delta[i];
         }
-        evaluate(model, state, ws, true, kappa);
+        evaluate_kept(model, state, ws, true, kappa);
         scale_soc_rows(model, ws, true, kappa);
         if norm2(&ws.residual) <= (1.0 - 1e-4 * alpha) * merit {
             std::mem::swap(&mut ws.w, &mut ws.w_trial);

@@ -261,6 +261,110 @@ pub(crate) fn evaluate(
     v
 }
 
+/// What [`evaluate_kept`] keeps for [`recentre`].
+#[derive(Clone, Debug)]
+pub(crate) struct Kept {
+    /// The residual at κ = 0.
+    residual: Vec<f64>,
+    /// The iterate it was evaluated at.
+    iterate: Vec<f64>,
+    /// Its violation metrics (they do not depend on κ).
+    violation: Violation,
+    /// False once anything else was evaluated (the derived quantities in the workspace, e.g.
+    /// `next_pose`, are then another iterate's).
+    valid: bool,
+}
+
+impl Kept {
+    pub(crate) fn new(n: usize) -> Self {
+        Self {
+            residual: vec![0.0; n],
+            iterate: vec![0.0; n],
+            violation: Violation {
+                r: f64::NAN,
+                k: f64::NAN,
+            },
+            valid: false,
+        }
+    }
+}
+
+/// [`evaluate`] that also keeps the residual at κ = 0, the iterate and the violation metrics
+/// for [`recentre`].
+pub(crate) fn evaluate_kept(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    use_trial: bool,
+    kappa: f64,
+) -> Violation {
+    // `x - 0.0` is `x`, so shifting afterwards gives the residual `evaluate` would
+    let v = evaluate(model, state, ws, use_trial, 0.0);
+    let w = if use_trial { &ws.w_trial } else { &ws.w };
+    let kept = &mut *ws.kept;
+    copy_live_rows(model, &ws.active, &ws.residual, &mut kept.residual);
+    copy_live_rows(model, &ws.active, w, &mut kept.iterate);
+    kept.violation = v;
+    kept.valid = true;
+    shift_complementarity(model, ws, kappa);
+    v
+}
+
+/// The residual at complementarity target `kappa` of the iterate `ws.w`, as
+/// `evaluate_kept(…, false, kappa)` gives it, without evaluating it again when it is the
+/// iterate of the last evaluation (kept by [`evaluate_kept`]). The interior-point method
+/// evaluates each accepted iterate at κ = 0 for its violations and then again at the centring
+/// κ; the contact geometry of those evaluations was a fifth of a robot step.
+pub(crate) fn recentre(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> Violation {
+    let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+    let mut unchanged = ws.kept.valid;
+    if unchanged {
+        let (w, kept) = (&ws.w, &ws.kept.iterate);
+        for_each_live_range(model, &ws.active, |r| {
+            unchanged &= same(&w[r.clone()], &kept[r]);
+        });
+    }
+    if !unchanged {
+        return evaluate_kept(model, state, ws, false, kappa);
+    }
+    copy_live_rows(model, &ws.active, &ws.kept.residual, &mut ws.residual);
+    shift_complementarity(model, ws, kappa);
+    ws.kept.violation
+}
+
+/// `dst = src` on every row but those of the inactive contact candidates, which every
+/// evaluation of a solve sets to the same `w - w₀ = 0` (their variables never move): on the
+/// A1 they are 1000 of 1024 candidates, and copying them cost more than the rest.
+fn copy_live_rows(model: &Model, active: &[bool], src: &[f64], dst: &mut [f64]) {
+    for_each_live_range(model, active, |r| dst[r.clone()].copy_from_slice(&src[r]));
+}
+
+/// The row ranges of everything but the inactive contact candidates.
+fn for_each_live_range(model: &Model, active: &[bool], mut f: impl FnMut(std::ops::Range<usize>)) {
+    let p = &model.topology.pattern;
+    // layout: bodies, joints, couplings, limits | contacts | tendon limits
+    let nodes = &model.topology.contact_node;
+    let (Some(&first), Some(&last)) = (nodes.first(), nodes.last()) else {
+        f(0..p.total_dim());
+        return;
+    };
+    f(0..p.offset(first));
+    for (c, &n) in nodes.iter().enumerate() {
+        if active[c] {
+            f(p.offset(n)..p.offset(n) + p.dim(n));
+        }
+    }
+    f(p.offset(last) + p.dim(last)..p.total_dim());
+}
+
+/// Subtract κ from every complementarity row (what `inequality::evaluate` does for `kappa`).
+fn shift_complementarity(model: &Model, ws: &mut Workspace, kappa: f64) {
+    if kappa != 0.0 {
+        let r = &mut ws.residual;
+        super::inequality::for_each_pair(model, &ws.active, |o, _, _, row, _| r[o + row] -= kappa);
+    }
+}
+
 pub(crate) fn evaluate_in(
     model: &Model,
     state: &State,
@@ -269,6 +373,7 @@ pub(crate) fn evaluate_in(
     residual: &mut [f64],
     kappa: f64,
 ) -> Violation {
+    ws.kept.valid = false;
     smooth_rows(model, state, ws, w, residual);
     if model.topology.has_cones {
         // adds contact and limit impulses to the body rows, so measure the body rows after it
@@ -410,7 +515,7 @@ fn add_damper_residual(
 pub(crate) fn assemble(model: &Model, ws: &mut Workspace) {
     let h = model.options.timestep;
     let t = &model.topology;
-    ws.matrix.zero();
+    ws.matrix.zero(&t.pattern);
     for (b, body) in model.bodies.iter().enumerate().skip(1) {
         let (_, om) = w_body(model, &ws.w, b);
         ws.dphi[b] = quat::step_map_dphi_domega(&om, h);
@@ -971,6 +1076,64 @@ mod tests {
                     assert!(r.abs() < 1e-15, "{kinds:?}: row {} = {r}", o + row + i);
                 }
             }
+        }
+    }
+
+    /// `recentre` gives what a full evaluation gives, bit for bit: from the kept residual when
+    /// the iterate was the last one evaluated, by evaluating again when the iterate changed or
+    /// another point (a line-search trial) was evaluated since.
+    #[test]
+    fn recentre_equals_a_full_evaluation() {
+        let model = contact_model();
+        let state = crate::State::reference(&model);
+        let mut ws = Workspace::new(&model);
+        prepare(&model, &state, &mut ws, &[], &AppliedForces::default());
+        ws.active.fill(true);
+        for (i, w) in ws.w.iter_mut().enumerate() {
+            *w += 0.3 * ((i as f64) * 1.3).cos();
+            if i >= model.topology.smooth_dim {
+                *w = w.abs() + 0.5;
+            }
+        }
+        let kappa = 0.3;
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let full = |ws: &mut Workspace| {
+            let v = evaluate(&model, &state, ws, false, kappa);
+            (
+                bits(&ws.residual),
+                v.r.to_bits(),
+                v.k.to_bits(),
+                ws.next_pose.clone(),
+            )
+        };
+        for case in 0..3 {
+            evaluate_kept(&model, &state, &mut ws, false, 0.0);
+            match case {
+                1 => ws.w[2] += 0.1,
+                2 => {
+                    ws.w_trial.copy_from_slice(&ws.w);
+                    ws.w_trial[2] += 0.1;
+                    evaluate_kept(&model, &state, &mut ws, true, kappa);
+                }
+                _ => {}
+            }
+            let v = recentre(&model, &state, &mut ws, kappa);
+            let fast = (
+                bits(&ws.residual),
+                v.r.to_bits(),
+                v.k.to_bits(),
+                ws.next_pose.clone(),
+            );
+            let slow = full(&mut ws);
+            assert!(
+                fast.0 == slow.0 && fast.1 == slow.1 && fast.2 == slow.2,
+                "case {case}"
+            );
+            let mut poses = fast.3.iter().zip(&slow.3);
+            assert!(
+                poses.all(|(a, b)| a.pos == b.pos && a.quat == b.quat),
+                "case {case}"
+            );
         }
     }
 

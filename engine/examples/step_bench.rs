@@ -1,0 +1,83 @@
+//! Forward-step speed on an MJCF model, the Table V workload without Jacobians (dt = 0.01,
+//! controls uniform in the control range, the same generator as `gradient_phases`):
+//! `cargo run --release -p ukemi-engine --example step_bench -- MODEL.xml [STEPS] [REPEATS]`.
+//! Prints the best-of-`REPEATS` ms/step, the IPM iterations per step (mean, median, max), the
+//! steps that were not converged or were subdivided, the mean active contact candidates, and a fingerprint of the final state (bits
+//! of every position, orientation and velocity) to check that a speed change kept the physics
+//! bit for bit.
+#![allow(clippy::print_stdout)]
+use std::time::Instant;
+
+use ukemi_engine::{State, Workspace, mjcf, set_minimal, step};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let path = args.get(1).expect("model path");
+    let steps: usize = args.get(2).map_or(100, |s| s.parse().unwrap());
+    let repeats: usize = args.get(3).map_or(1, |s| s.parse().unwrap());
+    let model = mjcf::load_path(std::path::Path::new(path)).unwrap().model;
+    let mut opts = model.options.clone();
+    opts.timestep = 0.01;
+    let model = model.with_options(opts).unwrap();
+    let mut best = f64::INFINITY;
+    let mut last = None;
+    for _ in 0..repeats {
+        let mut state = State::reference(&model);
+        let (qpos, qvel) = match model.keyframes.first() {
+            Some(k) => (k.qpos.clone(), k.qvel.clone()),
+            None => (model.qpos0.clone(), vec![0.0; model.nv]),
+        };
+        set_minimal(&model, &mut state, &qpos, &qvel).unwrap();
+        let mut ws = Workspace::new(&model);
+        let mut seed = 12345u64;
+        let mut rand = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let ctrls: Vec<Vec<f64>> = (0..steps)
+            .map(|_| {
+                model
+                    .actuators
+                    .iter()
+                    .map(|a| {
+                        let (lo, hi) = a.ctrlrange.unwrap_or((-1.0, 1.0));
+                        lo + (hi - lo) * rand()
+                    })
+                    .collect()
+            })
+            .collect();
+        let (mut its, mut failed, mut subdivided, mut active) = (Vec::new(), 0, 0, 0);
+        let t0 = Instant::now();
+        for ctrl in &ctrls {
+            let r = step(&model, &mut state, &mut ws, ctrl).unwrap();
+            its.push(r.iterations);
+            failed += usize::from(!r.status.is_success());
+            subdivided += usize::from(r.subdivisions > 1);
+            active += ws.active_contacts();
+        }
+        best = best.min(t0.elapsed().as_secs_f64());
+        let mut print = 0u64;
+        for b in 1..model.nbody() {
+            let p = state.pose(b);
+            let (v, w) = state.velocity(b);
+            for x in p.pos.iter().chain(p.quat.coords.iter()).chain(&v).chain(&w) {
+                print = print.rotate_left(5) ^ x.to_bits();
+            }
+        }
+        last = Some((its, failed, subdivided, active, print));
+    }
+    let (mut its, failed, subdivided, active, print) = last.unwrap();
+    let total: usize = its.iter().sum();
+    its.sort_unstable();
+    println!(
+        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {}; unconverged {failed}, subdivided {subdivided}; active candidates {:.1} of {}; state fingerprint {print:016x}",
+        1e3 * best / steps as f64,
+        total as f64 / steps as f64,
+        its[steps / 2],
+        its[steps - 1],
+        active as f64 / steps as f64,
+        model.ncontact(),
+    );
+}
