@@ -65,11 +65,19 @@ pub(crate) fn polish(model: &Model, state: &State, ws: &mut Workspace) -> usize 
 /// A solve that failed, retried from its last iterate with every saturated friction cone held on
 /// the sliding branch (any slip speed): a cone sliding at the limit is strictly complementary at
 /// κ = 0, where its held rows are well conditioned, while the interior-point iterates can stall
-/// next to it (measured: random scenes 351, 762, 955 stalled with a sliding cone's
-/// complementarity stuck at 1e-7..1e-5). Returns the iterations spent and whether the held
-/// solution converged and is consistent (then it is in `ws`; else `ws` is as before).
+/// next to it (random scene 225's step 51 stalled at every subdivision and converges with it;
+/// scenes 351, 762 and 955, whose stalls also leave a sliding cone's complementarity at
+/// 1e-7..1e-5, stall in their other pairs too and are not rescued). Returns the iterations spent
+/// and whether the held solution converged and is consistent (then it is in `ws`; else `ws` is
+/// as before).
 pub(crate) fn rescue(model: &Model, state: &State, ws: &mut Workspace) -> (usize, bool) {
-    hold(model, state, ws, f64::INFINITY)
+    let (iterations, kept) = hold(model, state, ws, f64::INFINITY);
+    if kept {
+        // no converged interior-point solution to keep the held friction impulses of
+        // (`inequality::store`): the held ones are stored
+        ws.w_acceptable.copy_from_slice(&ws.w);
+    }
+    (iterations, kept)
 }
 
 fn hold(model: &Model, state: &State, ws: &mut Workspace, slip_max: f64) -> (usize, bool) {
