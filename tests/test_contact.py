@@ -172,3 +172,33 @@ def test_activation_falls_back_to_every_candidate_when_a_solve_fails():
     least = min(ukemi.signed_distances(m, m.make_state(qpos=q, qvel=v)).min()
                 for q, v in zip(tr.qpos, tr.qvel))
     assert least > -1e-8
+
+
+THIN_PADS = """
+<mujoco>
+  <option gravity="0 0 0" timestep="0.01"/>
+  <worldbody>
+    <geom name="fixed_pad" type="box" size="0.003 0.002 0.003" pos="0 -0.002 0"/>
+    <body name="finger">
+      <inertial pos="0 0 0" mass="0.02" diaginertia="1e-5 1e-5 1e-5"/>
+      <joint name="slide" type="slide" axis="0 1 0" range="0 0.04" limited="true"/>
+      <geom name="pad" type="box" size="0.003 0.002 0.003" pos="0 0.002 0"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_thin_box_closing_past_its_thickness_in_one_step_stops_on_the_near_face():
+    """A 4 mm pad 7 mm from a fixed pad, closing at 20 m/s: the step's predicted pose lies far
+    past the fixed pad. The face that measures the corners must be the near one (the pads are
+    apart at the start of the step); chosen at the predicted pose it was the far face, behind
+    which the pad already lay: the step failed and the pad ended 4.8 mm inside the other pad,
+    below its joint limit. At the limit q = 0 the two pads are exactly flush."""
+    m = ukemi.Model.from_xml_string(THIN_PADS)
+    s = m.make_state(qpos=[0.007], qvel=[-20.0])
+    traj = ukemi.rollout(m, s, nsteps=5, on_failure="return")
+    assert list(traj.status) == ["converged"] * 5
+    assert traj.qpos[:, 0].min() >= -1e-8  # the slide's lower limit
+    assert traj.min_distance.min() >= -1e-8
+    assert traj.qpos[1, 0] == pytest.approx(0.0, abs=1e-8)  # stopped flush in the first step

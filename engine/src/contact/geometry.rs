@@ -371,14 +371,15 @@ pub fn box_face_ball(
     kernels::ball_box_face(b, pose_b, half_a, pose_a, axis, sign).swapped()
 }
 
-/// The separating axis of least overlap of boxes A and B among their six face normals (unit,
-/// world, pointing from B towards A); ties go to B's axes, then the lower axis.
+/// The separating axis of least overlap (or largest separation) of boxes A and B among their
+/// six face normals (unit, world, pointing from B towards A) and the separation along it
+/// (positive: the boxes are apart); ties go to B's axes, then the lower axis.
 pub fn box_box_axis(
     half_a: &Vector3<f64>,
     pose_a: &GeomPose,
     half_b: &Vector3<f64>,
     pose_b: &GeomPose,
-) -> Vector3<f64> {
+) -> (f64, Vector3<f64>) {
     kernels::box_box_axis(half_a, pose_a, half_b, pose_b)
 }
 

@@ -207,19 +207,19 @@ pub fn witness_frozen(
     (w, pa, pb)
 }
 
-/// The feature of candidate `c` to hold fixed for a step whose bodies are predicted at
-/// `predicted_a`, `predicted_b` (the current poses advanced by the current velocities):
-/// a near-flat disk's rim point or a box corner's face ([`disk_rim_for_step`],
-/// [`box_face_for_step`]); `None` to evaluate the candidate exactly.
+/// The feature of candidate `c` to hold fixed for a step from the bodies' current poses
+/// `now_a`, `now_b`, predicted at `predicted_a`, `predicted_b` (the current poses advanced by
+/// the current velocities): a near-flat disk's rim point or a box corner's face
+/// ([`disk_rim_for_step`], [`box_face_for_step`]); `None` to evaluate the candidate exactly.
 pub fn freeze_for_step(
     c: &Contact,
     geoms: &[Geom],
-    predicted_a: &Pose,
-    predicted_b: &Pose,
+    (now_a, now_b): (&Pose, &Pose),
+    (predicted_a, predicted_b): (&Pose, &Pose),
 ) -> Option<Frozen> {
     disk_rim_for_step(c, geoms, predicted_a, predicted_b, false)
         .map(Frozen::Rim)
-        .or_else(|| box_face_for_step(c, geoms, predicted_a, predicted_b))
+        .or_else(|| box_face_for_step(c, geoms, (now_a, now_b), (predicted_a, predicted_b)))
 }
 
 /// The pose of body `b` (0 = world) one step of length `h` ahead at its current velocities.
@@ -252,19 +252,35 @@ const FACE_EDGE_TOL: f64 = 1e-6;
 /// front half of the box) is measured against that face's plane: a smooth constraint whose
 /// normal is the pair's normal, as MuJoCo's box–box contacts share one normal. Other corners
 /// (beside the box, or behind it) keep the exact distance.
+///
+/// Which poses: boxes that overlap or touch at the start of the step (`now_a`, `now_b`) are
+/// judged at the step's predicted poses (`predicted_a`, `predicted_b`), where the step ends.
+/// Boxes that are apart at the start are judged at the current poses, along the axis that
+/// separates them now: a fast thin box's predicted pose can lie past the other box (the
+/// Panda's 4–8 mm finger pads closing at 1.2 m/s each predict 23 mm of travel in a 10 ms
+/// step), and the face selected there is the far face, whose plane the corner is already
+/// behind (−2.4e-2 m while the pads were 1.6e-2 m apart): a constraint that contradicted
+/// the fingers' joint limits, and every solve of the step failed.
 pub fn box_face_for_step(
     c: &Contact,
     geoms: &[Geom],
-    predicted_a: &Pose,
-    predicted_b: &Pose,
+    (now_a, now_b): (&Pose, &Pose),
+    (predicted_a, predicted_b): (&Pose, &Pose),
 ) -> Option<Frozen> {
     let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
     let (Shape::Box { half_extents: ha }, Shape::Box { half_extents: hb }) = (&ga.shape, &gb.shape)
     else {
         return None;
     };
-    let (pa, pb) = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
-    let normal = geometry::box_box_axis(ha, &pa, hb, &pb); // from B towards A
+    let (na, nb) = (ga.world_pose(now_a), gb.world_pose(now_b));
+    let (separation, normal_now) = geometry::box_box_axis(ha, &na, hb, &nb);
+    let (pa, pb, normal) = if separation > 0.0 {
+        (na, nb, normal_now)
+    } else {
+        let (pa, pb) = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
+        let (_, normal) = geometry::box_box_axis(ha, &pa, hb, &pb); // from B towards A
+        (pa, pb, normal)
+    };
     // (corner in world, the measuring box, its pose, the outward direction its face should face)
     let (corner, half, pose, outward) = match &c.feature {
         Feature::SphereBox { a, .. } => (pa.transform_point(&a.center), hb, &pb, normal),
@@ -334,7 +350,8 @@ pub fn signed_distances(model: &crate::Model, state: &crate::State) -> Vec<f64> 
         .iter()
         .map(|c| {
             let (ga, gb) = (&model.geoms[c.geom_a], &model.geoms[c.geom_b]);
-            let face = box_face_for_step(c, &model.geoms, &pose(ga.body), &pose(gb.body));
+            let (pa, pb) = (pose(ga.body), pose(gb.body));
+            let face = box_face_for_step(c, &model.geoms, (&pa, &pb), (&pa, &pb));
             witness_frozen(c, &model.geoms, pose, face).0.phi
         })
         .collect()

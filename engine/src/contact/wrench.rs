@@ -43,8 +43,11 @@ pub fn contact_forces(model: &Model, state: &State, state_next: &State) -> Conta
         let frozen = freeze_for_step(
             c,
             &model.geoms,
-            &predicted_pose(state, ga.body, h),
-            &predicted_pose(state, gb.body, h),
+            (&pose(ga.body), &pose(gb.body)),
+            (
+                &predicted_pose(state, ga.body, h),
+                &predicted_pose(state, gb.body, h),
+            ),
         );
         let (w, _, _) = witness_frozen(c, &model.geoms, pose, frozen);
         // f = [n t1 t2] f_c on a at p_a; -f on b at p_b

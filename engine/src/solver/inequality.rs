@@ -156,8 +156,11 @@ pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace
     ws.frozen[c] = crate::contact::freeze_for_step(
         contact,
         &model.geoms,
-        &predicted_pose(state, ga.body, h),
-        &predicted_pose(state, gb.body, h),
+        (&pose(ga.body), &pose(gb.body)),
+        (
+            &predicted_pose(state, ga.body, h),
+            &predicted_pose(state, gb.body, h),
+        ),
     );
     let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
     ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);

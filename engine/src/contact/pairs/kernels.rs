@@ -260,13 +260,13 @@ pub(super) fn ball_box_face(
 
 /// The face normal of A or B along which the two boxes overlap least (or are separated most):
 /// separation `|uᵀ(c_a − c_b)| − Σ_k h_k |uᵀ e_k|` over both boxes' axes `e_k`, oriented
-/// from B towards A.
+/// from B towards A, and that separation (positive: the boxes are apart along it).
 pub(super) fn box_box_axis(
     half_a: &Vector3<f64>,
     pose_a: &GeomPose,
     half_b: &Vector3<f64>,
     pose_b: &GeomPose,
-) -> Vector3<f64> {
+) -> (f64, Vector3<f64>) {
     let d = pose_a.pos - pose_b.pos;
     let radius = |half: &Vector3<f64>, pose: &GeomPose, u: &Vector3<f64>| -> f64 {
         (0..3).map(|k| half[k] * u.dot(&axis(pose, k)).abs()).sum()
@@ -282,5 +282,5 @@ pub(super) fn box_box_axis(
         }
     }
     let u = best.1;
-    if u.dot(&d) < 0.0 { -u } else { u }
+    (best.0, if u.dot(&d) < 0.0 { -u } else { u })
 }
