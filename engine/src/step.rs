@@ -112,12 +112,57 @@ pub fn step_with(
                     ..r
                 }
             }
-            Err(iterations) => StepReport {
-                iterations: iterations + report.iterations,
-                ..report
-            },
+            Err(iterations) => {
+                let start = ws.start.clone();
+                match long_solve(model, &start, ws, ctrl, forces, whole_converged)? {
+                    Some((next, r)) => {
+                        *state = next;
+                        StepReport {
+                            iterations: r.iterations + iterations + report.iterations,
+                            ..r
+                        }
+                    }
+                    None => StepReport {
+                        iterations: iterations + report.iterations,
+                        ..report
+                    },
+                }
+            }
         },
     )
+}
+
+/// The last resort of a step whose whole solve and every subdivision failed (`whole_converged`
+/// false; else `None` at once): the whole step from `start` solved again with four times the
+/// iteration budget, kept only if it converges without gaining energy ([`gains_energy`]); its
+/// next state and report (solution in `ws`), else `None`. The shared Panda's step 135 under
+/// Table V's random controls (fingers closing onto their limits and each other while a pad
+/// slides on the floor under ~150 N: sliding friction cones cut the step lengths to 0.01-0.3)
+/// converges in 141 iterations; random scene 701's long solves converge to energy-gaining
+/// roots and are refused.
+pub(crate) fn long_solve(
+    model: &Model,
+    start: &State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+    whole_converged: bool,
+) -> Result<Option<(State, StepReport)>> {
+    if whole_converged {
+        return Ok(None);
+    }
+    let long = model.with_options(crate::Options {
+        max_iter: 4 * model.options.max_iter,
+        ..model.options.clone()
+    })?;
+    newton::prepare(&long, start, ws, ctrl, forces);
+    let report = newton::solve(&long, start, ws);
+    if !report.status.is_success() {
+        return Ok(None);
+    }
+    let mut next = start.clone();
+    newton::write_state(&long, &mut next, ws);
+    Ok((!gains_energy(&long, start, &next, ws)).then_some((next, report)))
 }
 
 /// Whether a converged step from `start` to `next` (applied impulses in `ws`) let its

@@ -746,13 +746,14 @@ impl Linearization {
         let t0 = Instant::now();
         let (mut ws, report) = solve_hard(model, &point.state, ctrl)?;
         // the same decisions as `crate::step`: a failed or energy-gaining solve is subdivided
-        match substeps::retry(model, &point.state, &mut ws, ctrl, report)? {
+        // (or, failing that, solved with a longer budget: its report is the stored one)
+        let report = match substeps::retry(model, &point.state, &mut ws, ctrl, report)? {
             StoredStep::Substeps(stored) => {
                 let lin = Substeps::new(model, point, ctrl, wrt, kappa_grad, &stored, ws, method)?;
                 return Ok(Linearization(Kind::Substeps(lin)));
             }
-            StoredStep::Whole(_) => {}
-        }
+            StoredStep::Whole(solution) => solution.report,
+        };
         let (next, report, central, ws) =
             finish_solve(model, &point.state, ws, report, kappa_grad, &mut times, t0)?;
         let solved = Solved {

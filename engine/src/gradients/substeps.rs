@@ -34,7 +34,7 @@ use crate::model::Model;
 use crate::model::params::Param;
 use crate::solver::newton;
 use crate::state::{State, StepReport, Workspace};
-use crate::step::{AppliedForces, gains_energy, subdivided_with, substep_model};
+use crate::step::{AppliedForces, gains_energy, long_solve, subdivided_with, substep_model};
 use crate::{Result, ensure};
 
 /// What a forward pass keeps of a subdivided step: each sub-step's start and solution.
@@ -83,7 +83,13 @@ pub(crate) fn retry(
     }
     match solve(model, state, ws, ctrl, whole) {
         Ok(sub) => Ok(StoredStep::Substeps(sub)),
-        Err(_) if converged => {
+        Err(e) if !converged => {
+            match long_solve(model, state, ws, ctrl, &Default::default(), false)? {
+                Some((_, report)) => Ok(StoredStep::Whole(StoredSolution::of(ws, report))),
+                None => Err(e),
+            }
+        }
+        Err(_) => {
             // the sub-steps overwrote `ws`: back to the whole step's solution
             newton::prepare(model, state, ws, ctrl, &AppliedForces::default());
             ws.w.copy_from_slice(&solution.w);
@@ -92,7 +98,6 @@ pub(crate) fn retry(
             newton::evaluate(model, state, ws, false, 0.0);
             Ok(StoredStep::Whole(solution))
         }
-        Err(e) => Err(e),
     }
 }
 
