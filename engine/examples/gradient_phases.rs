@@ -11,9 +11,11 @@
 //! start.
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{
-    Coordinates, Linearization, PartialsMethod, PhaseTimes, State, Workspace, Wrt, mjcf,
-    set_minimal, step,
+    Coordinates, Linearization, PartialsMethod, PhaseTimes, Workspace, Wrt, mjcf, step,
 };
+
+#[path = "common/workload.rs"]
+mod workload;
 
 #[derive(Default)]
 struct Sum {
@@ -75,33 +77,15 @@ fn main() {
     opts.timestep = 0.01;
     opts.central_warm_start = !flag("neutral");
     let model = model.with_options(opts).unwrap();
-    let mut state = State::reference(&model);
-    let (qpos, qvel) = match model.keyframes.first() {
-        Some(k) => (k.qpos.clone(), k.qvel.clone()),
-        None => (model.qpos0.clone(), vec![0.0; model.nv]),
-    };
-    set_minimal(&model, &mut state, &qpos, &qvel).unwrap();
+    let mut state = workload::start_state(&model);
     let mut ws = Workspace::new(&model);
     // deterministic controls uniform in the control range
-    let mut seed = 12345u64;
-    let mut rand = move || {
-        seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut controls = workload::Controls::new();
     let (mut coloured, mut reference) = (Sum::default(), Sum::default());
     let (mut failed, mut central_failed, mut worst) = (0, 0, 0.0f64);
     let (mut plain, mut with_jac) = (0.0, 0.0);
     for _ in 0..steps {
-        let ctrl: Vec<f64> = model
-            .actuators
-            .iter()
-            .map(|a| {
-                let (lo, hi) = a.ctrlrange.unwrap_or((-1.0, 1.0));
-                lo + (hi - lo) * rand()
-            })
-            .collect();
+        let ctrl = controls.next(&model);
         let lin = |m| {
             let c = Coordinates::Minimal;
             Linearization::with_method(&model, &state, &ctrl, c, Wrt::STATE_CTRL, kappa, m)

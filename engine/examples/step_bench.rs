@@ -8,7 +8,10 @@
 #![allow(clippy::print_stdout)]
 use std::time::Instant;
 
-use ukemi_engine::{State, Workspace, mjcf, set_minimal, step};
+use ukemi_engine::{Workspace, mjcf, step};
+
+#[path = "common/workload.rs"]
+mod workload;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -22,32 +25,10 @@ fn main() {
     let mut best = f64::INFINITY;
     let mut last = None;
     for _ in 0..repeats {
-        let mut state = State::reference(&model);
-        let (qpos, qvel) = match model.keyframes.first() {
-            Some(k) => (k.qpos.clone(), k.qvel.clone()),
-            None => (model.qpos0.clone(), vec![0.0; model.nv]),
-        };
-        set_minimal(&model, &mut state, &qpos, &qvel).unwrap();
+        let mut state = workload::start_state(&model);
         let mut ws = Workspace::new(&model);
-        let mut seed = 12345u64;
-        let mut rand = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let ctrls: Vec<Vec<f64>> = (0..steps)
-            .map(|_| {
-                model
-                    .actuators
-                    .iter()
-                    .map(|a| {
-                        let (lo, hi) = a.ctrlrange.unwrap_or((-1.0, 1.0));
-                        lo + (hi - lo) * rand()
-                    })
-                    .collect()
-            })
-            .collect();
+        let mut controls = workload::Controls::new();
+        let ctrls: Vec<Vec<f64>> = (0..steps).map(|_| controls.next(&model)).collect();
         let (mut its, mut failed, mut subdivided, mut active) = (Vec::new(), 0, 0, 0);
         let t0 = Instant::now();
         for ctrl in &ctrls {

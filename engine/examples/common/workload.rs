@@ -1,0 +1,42 @@
+//! The Table V workload shared by the examples: the model's first keyframe (else its reference
+//! pose) and deterministic controls uniform in each actuator's control range.
+use ukemi_engine::{Model, State, set_minimal};
+
+/// The state at the model's first keyframe, else at `qpos0` at rest.
+pub fn start_state(model: &Model) -> State {
+    let mut state = State::reference(model);
+    let (qpos, qvel) = match model.keyframes.first() {
+        Some(k) => (k.qpos.clone(), k.qvel.clone()),
+        None => (model.qpos0.clone(), vec![0.0; model.nv]),
+    };
+    set_minimal(model, &mut state, &qpos, &qvel).unwrap();
+    state
+}
+
+/// Deterministic controls (a 64-bit LCG), uniform in each control range ([-1, 1] if unlimited).
+pub struct Controls {
+    seed: u64,
+}
+
+impl Controls {
+    pub fn new() -> Self {
+        Controls { seed: 12345 }
+    }
+
+    /// The next control vector.
+    pub fn next(&mut self, model: &Model) -> Vec<f64> {
+        model
+            .actuators
+            .iter()
+            .map(|a| {
+                self.seed = self
+                    .seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let u = (self.seed >> 11) as f64 / (1u64 << 53) as f64;
+                let (lo, hi) = a.ctrlrange.unwrap_or((-1.0, 1.0));
+                lo + (hi - lo) * u
+            })
+            .collect()
+    }
+}
