@@ -119,6 +119,23 @@ def test_with_options_returns_new_model(pend):
     assert s.time == pytest.approx(0.002)
 
 
+def test_warm_start_margin_is_an_option_and_validated(pend):
+    # a resting sphere warm-started with any margin stays at rest (the margin changes only the
+    # interior-point start); bad margins name the field
+    for bad in (0.0, -1e-3, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="warm_start_margin"):
+            pend.with_options(warm_start_margin=bad)
+    b = ukemi.ModelBuilder(timestep=0.001)
+    b.add_geom("floor", body="world", shape="plane", friction=0.8)
+    b.add_body("ball", mass=1.0, inertia=(0.004, 0.004, 0.004), pos=(0, 0, 0.1))
+    b.add_joint("free", kind="floating", parent="world", child="ball")
+    b.add_geom("g", body="ball", shape="sphere", size=(0.1,), friction=0.8)
+    m = b.compile()
+    for margin in (1e-6, 1e-3):
+        tr = ukemi.rollout(m.with_options(warm_start_margin=margin), m.make_state(), nsteps=500)
+        assert np.abs(tr.qvel[-100:]).max() < 1e-8
+
+
 def test_nonconvergence_is_reported_not_silent(pend):
     tight = pend.with_options(max_iter=1, rtol=1e-300, acceptable_rtol=0.0)
     s0 = tight.make_state(qpos=[1.0], qvel=[3.0])

@@ -508,7 +508,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -522,6 +522,7 @@ impl PyModel {
         max_ls: Option<usize>,
         undercut: Option<f64>,
         warm_start: Option<bool>,
+        warm_start_margin: Option<f64>,
         regularization: Option<f64>,
         kappa_grad: Option<f64>,
         activation_margin: Option<f64>,
@@ -543,6 +544,7 @@ impl PyModel {
             o.acceptable_kappa_tol = acceptable_kappa_tol.unwrap_or(o.acceptable_kappa_tol);
             o.undercut = undercut.unwrap_or(o.undercut);
             o.warm_start = warm_start.unwrap_or(o.warm_start);
+            o.warm_start_margin = warm_start_margin.unwrap_or(o.warm_start_margin);
             o.nt_scaling = nt_scaling.unwrap_or(o.nt_scaling);
             o.central_warm_start = central_warm_start.unwrap_or(o.central_warm_start);
             o.max_subdivisions = max_subdivisions.unwrap_or(o.max_subdivisions);

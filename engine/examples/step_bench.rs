@@ -1,6 +1,7 @@
 //! Forward-step speed on an MJCF model, the Table V workload without Jacobians (dt = 0.01,
 //! controls uniform in the control range, the same generator as `gradient_phases`):
-//! `cargo run --release -p ukemi-engine --example step_bench -- MODEL.xml [STEPS] [REPEATS]`.
+//! `cargo run --release -p ukemi-engine --example step_bench -- MODEL.xml [STEPS] [REPEATS] [SEED]`
+//! (SEED: another control sequence than the default one).
 //! Prints the best-of-`REPEATS` ms/step, the IPM iterations per step (mean, median, max), the
 //! steps that were not converged or were subdivided, the mean active contact candidates, and a fingerprint of the final state (bits
 //! of every position, orientation and velocity) to check that a speed change kept the physics
@@ -18,6 +19,7 @@ fn main() {
     let path = args.get(1).expect("model path");
     let steps: usize = args.get(2).map_or(100, |s| s.parse().unwrap());
     let repeats: usize = args.get(3).map_or(1, |s| s.parse().unwrap());
+    let seed: Option<u64> = args.get(4).map(|s| s.parse().unwrap());
     let model = mjcf::load_path(std::path::Path::new(path)).unwrap().model;
     let mut opts = model.options.clone();
     opts.timestep = 0.01;
@@ -27,7 +29,10 @@ fn main() {
     for _ in 0..repeats {
         let mut state = workload::start_state(&model);
         let mut ws = Workspace::new(&model);
-        let mut controls = workload::Controls::new();
+        let mut controls = match seed {
+            Some(seed) => workload::Controls::with_seed(seed),
+            None => workload::Controls::new(),
+        };
         let ctrls: Vec<Vec<f64>> = (0..steps).map(|_| controls.next(&model)).collect();
         let (mut its, mut failed, mut subdivided, mut active) = (Vec::new(), 0, 0, 0);
         let t0 = Instant::now();

@@ -167,3 +167,46 @@ fn a_contact_the_estimate_misses_is_still_enforced() {
     assert!(phi.abs() < 1e-8, "penetration or gap {phi:e}");
     assert!(state.contact_impulse(&model)[0] > 1.0);
 }
+
+/// Two spheres 2 cm apart (beyond the 1 cm margin) in zero gravity, started with velocities
+/// `(v_a, ω, v_b, ω)`; returns whether their candidate took part in the first step.
+fn pair_active(v_a: [f64; 3], v_b: [f64; 3], omega: [f64; 3]) -> bool {
+    let mut b = ModelBuilder::new().timestep(0.01).gravity([0.0; 3]);
+    for (name, x) in [("a", 0.0), ("b", 0.22)] {
+        b = free_body(
+            b,
+            name,
+            1.0,
+            Shape::Sphere { radius: 0.1 },
+            [x, 0.0, 1.0],
+            [1.0, 0.0, 0.0, 0.0],
+            0.5,
+            ContactModel::Nonlinear,
+        );
+    }
+    let model = with_margin(&b.compile().unwrap(), 0.01);
+    let mut state = State::reference(&model);
+    let w = Vector3::from(omega);
+    state.set_velocity(1, &Vector3::from(v_a), &w);
+    state.set_velocity(2, &Vector3::from(v_b), &w);
+    let mut ws = Workspace::new(&model);
+    let r = step(&model, &mut state, &mut ws, &[]).unwrap();
+    assert_eq!(r.status, SolveStatus::Converged, "{r:?}");
+    ws.active_contacts() == 1
+}
+
+#[test]
+fn bodies_moving_rigidly_together_leave_their_candidate_out() {
+    // the activation reach bounds the speed of one geom relative to the other's body: 5 m/s
+    // side by side, or turning together about a's centre at 3 rad/s, is no relative motion
+    // (a sum of the two bodies' speeds would reach 0.01 + 2 h 10 m/s = 21 cm)
+    assert!(!pair_active([5.0, 0.0, 0.0], [5.0, 0.0, 0.0], [0.0; 3]));
+    let rigid_b = Vector3::new(0.0, 0.0, 3.0).cross(&Vector3::new(0.22, 0.0, 0.0));
+    assert!(!pair_active([0.0; 3], rigid_b.into(), [0.0, 0.0, 3.0]));
+    // closing at 1 m/s (either body), or spinning against each other, they take part
+    assert!(pair_active([1.0, 0.0, 0.0], [0.0; 3], [0.0; 3]));
+    assert!(pair_active([0.0; 3], [-1.0, 0.0, 0.0], [0.0; 3]));
+    // equal spins about their own centres (not rigid motion): b's material near a moves at
+    // |ω × (c_b - c_a)| = 1.1 m/s relative to a's body
+    assert!(pair_active([0.0; 3], [0.0; 3], [0.0, 0.0, 5.0]));
+}

@@ -20,7 +20,12 @@ pub struct Controls {
 
 impl Controls {
     pub fn new() -> Self {
-        Controls { seed: 12345 }
+        Self::with_seed(12345)
+    }
+
+    /// Another deterministic sequence.
+    pub fn with_seed(seed: u64) -> Self {
+        Controls { seed }
     }
 
     /// The next control vector.

@@ -160,6 +160,14 @@ impl Options {
             )
         );
         ensure!(
+            self.warm_start_margin.is_finite() && self.warm_start_margin > 0.0,
+            Error::model(
+                "warm_start_margin",
+                self.warm_start_margin,
+                "must be finite and > 0"
+            )
+        );
+        ensure!(
             self.activation_margin > 0.0,
             Error::model(
                 "activation_margin",

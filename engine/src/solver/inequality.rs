@@ -97,7 +97,7 @@ fn v3(x: &[f64], i: usize) -> Vector3<f64> {
 }
 
 /// Cold start: the neutral point (γ = s = 1, ξ = η = e). Warm start: the previous step's values
-/// (stored in `state`) pushed at least `margin` inside their cones.
+/// (stored in `state`) pushed at least `warm_start_margin` inside their cones.
 pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm: bool) {
     let t = &model.topology;
     let mut k = 0;
@@ -189,10 +189,11 @@ fn geom_reach(geom: &crate::contact::Geom) -> f64 {
 }
 
 /// Choose the candidates that take part in this step (after [`prepare`]): those whose current
-/// distance is within `activation_margin + h (2 u + h |g|)`, `u = Σ_bodies |v| + |ω| ρ` the
-/// largest speed of any point of the two geoms from the current velocities. Candidates
-/// between two bodies at rest stay inactive until the distance shrinks; a step that closes a
-/// gap faster than this estimate (an impulsive actuator or collision) is caught by
+/// distance is within `activation_margin + h (2 u + h |g|)`, `u` the largest speed of any
+/// point of one geom relative to the other's body ([`relative_speed`]) at the current
+/// velocities. Candidates between two bodies at rest relative to each other (the links of an
+/// arm carried by a moving base) stay inactive until the distance shrinks; a step that closes
+/// a gap faster than this estimate (an impulsive actuator or collision) is caught by
 /// [`missed_contacts`] and re-solved.
 pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace) {
     let margin = model.options.activation_margin;
@@ -203,24 +204,43 @@ pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace) {
     let h = model.options.timestep;
     let drift = h * h * model.options.gravity.norm();
     for (c, contact) in model.contacts.iter().enumerate() {
-        let mut speed = 0.0;
-        for g in [contact.geom_a, contact.geom_b] {
-            let geom = &model.geoms[g];
-            if geom.body == 0 {
-                continue;
-            }
-            let (v, om) = state.velocity(geom.body);
-            speed += v.norm();
-            let spin = om.norm();
-            if spin > 0.0 {
-                speed += spin * geom_reach(geom);
-            }
-        }
+        let speed = relative_speed(
+            state,
+            &model.geoms[contact.geom_a],
+            &model.geoms[contact.geom_b],
+        );
         let reach = margin + 2.0 * h * speed + drift;
         // NaN distances or speeds stay active (the solve then reports them)
         let phi = ws.contact_now[c].phi;
         ws.active[c] = phi.is_nan() || reach.is_nan() || phi <= reach;
     }
+}
+
+/// Bound on the speed of any point of one geom relative to the material of the other's body at
+/// the current velocities. With `a` the geom of finite reach `ρ` from its body's centre `c_a`
+/// (and not on the world), a point `p` of `a` moves relative to `b`'s body at
+/// `V + Ω × (p - c_a)`, `V = v_a - v_b - ω_b × (c_a - c_b)`, `Ω = ω_a - ω_b` (world frame), so
+/// at most `|V| + |Ω| ρ`: two links moving rigidly together have none.
+fn relative_speed(state: &State, ga: &crate::contact::Geom, gb: &crate::contact::Geom) -> f64 {
+    let swap = ga.body == 0 || (gb.body != 0 && geom_reach(gb) < geom_reach(ga));
+    let (a, b) = if swap { (gb, ga) } else { (ga, gb) };
+    let motion = |body: usize| {
+        if body == 0 {
+            (Vector3::zeros(), Vector3::zeros(), Vector3::zeros())
+        } else {
+            let pose = state.pose(body);
+            let (v, w) = state.velocity(body);
+            (pose.pos, v, crate::math::quat::rotation(&pose.quat) * w)
+        }
+    };
+    let ((ca, va, wa), (cb, vb, wb)) = (motion(a.body), motion(b.body));
+    let spin = (wa - wb).norm();
+    let turn = if spin > 0.0 {
+        spin * geom_reach(a)
+    } else {
+        0.0
+    };
+    (va - vb - wb.cross(&(ca - cb))).norm() + turn
 }
 
 /// After a solve with some candidates inactive: activate every inactive candidate whose
@@ -369,6 +389,25 @@ pub(crate) fn evaluate(
     violations(model, &ws.active, &ws.saturated, w, residual, kappa)
 }
 
+/// Row `k` (0 normal, 1-2 tangential) of contact `c`'s relative velocity at the body
+/// velocities of the iterate `w` (the next midpoint velocities), through the contact frame at
+/// the current configuration.
+fn contact_velocity(model: &Model, ws: &Workspace, c: usize, w: &[f64], k: usize) -> f64 {
+    let t = &model.topology;
+    let now = &ws.contact_now[c].jac;
+    let [a, b] = t.contact_bodies[c];
+    let mut v = 0.0;
+    for (side, body) in [(0, a), (1, b)] {
+        if let Some(bn) = body_node(body) {
+            let ob = t.pattern.offset(bn);
+            v += (0..6)
+                .map(|i| now[k][6 * side + i] * w[ob + i])
+                .sum::<f64>();
+        }
+    }
+    v
+}
+
 /// Residual rows of contact `c` and its impulse on the bodies.
 fn contact_rows(model: &Model, ws: &Workspace, c: usize, w: &[f64], residual: &mut [f64]) {
     let t = &model.topology;
@@ -377,20 +416,7 @@ fn contact_rows(model: &Model, ws: &Workspace, c: usize, w: &[f64], residual: &m
     let x = &w[o..o + contact.model.dim()];
     let (mu, phi) = (contact.friction, ws.contact_phi[c]);
     let now = &ws.contact_now[c].jac;
-    // relative tangential velocity of the contact point at the next midpoint velocities
-    let vt = |k: usize| -> f64 {
-        let [a, b] = t.contact_bodies[c];
-        let mut v = 0.0;
-        for (side, body) in [(0, a), (1, b)] {
-            if let Some(bn) = body_node(body) {
-                let ob = t.pattern.offset(bn);
-                v += (0..6)
-                    .map(|i| now[k][6 * side + i] * w[ob + i])
-                    .sum::<f64>();
-            }
-        }
-        v
-    };
+    let vt = |k: usize| contact_velocity(model, ws, c, w, k);
     let r = &mut residual[o..o + contact.model.dim()];
     let force: [f64; 3] = match contact.model {
         ContactModel::Impact => {
