@@ -357,11 +357,17 @@ fn for_each_live_range(model: &Model, active: &[bool], mut f: impl FnMut(std::op
     f(p.offset(last) + p.dim(last)..p.total_dim());
 }
 
-/// Subtract κ from every complementarity row (what `inequality::evaluate` does for `kappa`).
+/// Subtract κ from every complementarity row (what `inequality::evaluate` does for `kappa`);
+/// a friction cone held saturated has equalities in its rows instead (`super::saturation`).
 fn shift_complementarity(model: &Model, ws: &mut Workspace, kappa: f64) {
     if kappa != 0.0 {
         let r = &mut ws.residual;
-        super::inequality::for_each_pair(model, &ws.active, |o, _, _, row, _| r[o + row] -= kappa);
+        super::inequality::for_each_pair_except(
+            model,
+            &ws.active,
+            &ws.saturated,
+            |o, _, _, row, _| r[o + row] -= kappa,
+        );
     }
 }
 
@@ -1106,9 +1112,19 @@ mod tests {
                 ws.next_pose.clone(),
             )
         };
-        for case in 0..3 {
+        // the last cases hold a friction cone on its boundary (`super::saturation`): its rows
+        // are equalities, which the κ shift must leave alone as `evaluate` does
+        let cone = model
+            .contacts
+            .iter()
+            .position(|c| c.model == crate::contact::ContactModel::Nonlinear)
+            .expect("a friction cone");
+        for case in 0..6 {
+            if case == 3 {
+                ws.saturated[cone] = Some([0.6, 0.8]);
+            }
             evaluate_kept(&model, &state, &mut ws, false, 0.0);
-            match case {
+            match case % 3 {
                 1 => ws.w[2] += 0.1,
                 2 => {
                     ws.w_trial.copy_from_slice(&ws.w);
