@@ -140,6 +140,19 @@ impl Error {
             got: got.to_vec(),
         }
     }
+
+    /// `Ok` if every entry of `values` is finite, else the input error naming the first bad
+    /// entry (`name[i]`) and its value.
+    pub fn check_finite(name: &str, values: &[f64]) -> Result<()> {
+        match values.iter().position(|x| !x.is_finite()) {
+            Some(i) => Err(Error::input(
+                format!("{name}[{i}]"),
+                values[i],
+                "must be finite",
+            )),
+            None => Ok(()),
+        }
+    }
 }
 
 /// `ensure!(cond, err)`: return `Err(err)` unless `cond` holds (one-line checks, as `polars_ensure!`).

@@ -38,13 +38,7 @@ pub fn set_instant_velocity(
         qvel0.len() == model.nv,
         Error::shape("qvel", &[model.nv], &[qvel0.len()])
     );
-    if let Some(i) = qvel0.iter().position(|x| !x.is_finite()) {
-        return Err(Error::input(
-            format!("qvel[{i}]"),
-            qvel0[i],
-            "must be finite",
-        ));
-    }
+    Error::check_finite("qvel", qvel0)?;
     // the steps are solved at least as tightly as the defaults: at a loose tolerance (1e-2) the
     // solution jitters with the start velocity and the iteration cannot settle
     let defaults = crate::Options::default();

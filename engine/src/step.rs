@@ -25,13 +25,7 @@ pub fn validate_inputs(
         ctrl.len() == model.nu(),
         Error::shape("ctrl", &[model.nu()], &[ctrl.len()])
     );
-    if let Some(i) = ctrl.iter().position(|x| !x.is_finite()) {
-        return Err(Error::input(
-            format!("ctrl[{i}]"),
-            ctrl[i],
-            "must be finite",
-        ));
-    }
+    Error::check_finite("ctrl", ctrl)?;
     if let Some(q) = forces.qfrc {
         ensure!(
             q.len() == model.nv,

@@ -81,20 +81,8 @@ pub fn validate_minimal(model: &Model, qpos: &[f64], qvel: &[f64]) -> Result<()>
         qvel.len() == model.nv,
         Error::shape("qvel", &[model.nv], &[qvel.len()])
     );
-    if let Some(i) = qpos.iter().position(|x| !x.is_finite()) {
-        return Err(Error::input(
-            format!("qpos[{i}]"),
-            qpos[i],
-            "must be finite",
-        ));
-    }
-    if let Some(i) = qvel.iter().position(|x| !x.is_finite()) {
-        return Err(Error::input(
-            format!("qvel[{i}]"),
-            qvel[i],
-            "must be finite",
-        ));
-    }
+    Error::check_finite("qpos", qpos)?;
+    Error::check_finite("qvel", qvel)?;
     for j in model
         .joints
         .iter()
