@@ -174,7 +174,9 @@ def test_fast_spin_is_reported_never_a_crash(free_body):
     """|ω| must stay below √2/h (a step turns a body by at most 90°; beyond, the discrete
     momentum has a second, spurious root before the step map's domain ends at 2/h): a spin past
     it fails cleanly in one step of h, is taken as sub-steps of h / n while √2 n/h exceeds it
-    (max_subdivisions), and fails cleanly beyond that."""
+    (max_subdivisions), and fails cleanly beyond that. (The accuracy limit `max_step_rotation`
+    is off here: see test_fast_turns_are_taken_as_sub_steps_of_at_most_max_step_rotation.)"""
+    free_body = free_body.with_options(max_step_rotation=np.inf)
     s = free_body.make_state(qvel=[0, 0, 0, 0, 0, 250.0])  # √2/h = 141 rad/s
     one = free_body.with_options(max_subdivisions=1)
     s1, info = ukemi.step(one, s, on_failure="return")
@@ -195,6 +197,28 @@ def test_fast_spin_is_reported_never_a_crash(free_body):
     s3, info = ukemi.step(free_body, fast, on_failure="return")
     assert info.status not in ukemi.SUCCESS_STATUSES and info.subdivisions == 1
     assert np.all(np.isfinite(s3.qpos))
+
+
+@pytest.mark.parametrize(("spin", "substeps"), [(20.0, 1), (40.0, 2), (170.0, 8), (250.0, 16),
+                                                (2000.0, 32)])
+def test_fast_turns_are_taken_as_sub_steps_of_at_most_max_step_rotation(free_body, spin,
+                                                                          substeps):
+    """The default `max_step_rotation` = 0.3 rad: a step that turns a body further is taken as
+    the fewest sub-steps (a power of two) that turn it at most that much each, up to
+    `max_subdivisions` (2000 rad/s turns 0.625 rad in each of 32 sub-steps: the most there
+    are). A torque-free tumble keeps its energy through them."""
+    assert free_body.options["max_step_rotation"] == 0.3
+    s = free_body.make_state(qvel=[0, 0, 0, 0, 0, spin])
+    nxt, info = ukemi.step(free_body, s)
+    assert info.converged and info.subdivisions == substeps
+    assert nxt.energy() == pytest.approx(s.energy(), rel=1e-10)
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.1, np.nan])
+def test_max_step_rotation_is_validated(free_body, bad):
+    with pytest.raises(ValueError, match="max_step_rotation"):
+        free_body.with_options(max_step_rotation=bad)
+    assert free_body.with_options(max_step_rotation=np.inf).options["max_step_rotation"] == np.inf
 
 
 def test_four_bar_loop_through_python():

@@ -471,6 +471,7 @@ impl PyModel {
             ("activation_margin", o.activation_margin),
             ("max_subdivisions", o.max_subdivisions as f64),
             ("energy_guard", o.energy_guard),
+            ("max_step_rotation", o.max_step_rotation),
             ("kappa_grad", o.kappa_grad.unwrap_or(0.0)),
         ]
         .into_iter()
@@ -508,7 +509,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -530,6 +531,7 @@ impl PyModel {
         central_warm_start: Option<bool>,
         max_subdivisions: Option<u32>,
         energy_guard: Option<f64>,
+        max_step_rotation: Option<f64>,
     ) -> PyResult<PyModel> {
         guard(|| {
             let mut o = self.inner.options.clone();
@@ -549,6 +551,8 @@ impl PyModel {
             o.central_warm_start = central_warm_start.unwrap_or(o.central_warm_start);
             o.max_subdivisions = max_subdivisions.unwrap_or(o.max_subdivisions);
             o.energy_guard = energy_guard.unwrap_or(o.energy_guard);
+            // max_step_rotation = inf turns the rotation limit off
+            o.max_step_rotation = max_step_rotation.unwrap_or(o.max_step_rotation);
             // activation_margin = inf keeps every contact candidate active
             o.activation_margin = activation_margin.unwrap_or(o.activation_margin);
             // kappa_grad = 0 selects the exact (unsmoothed) derivative

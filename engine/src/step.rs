@@ -90,15 +90,31 @@ pub fn step_with(
     let report = newton::solve(model, state, ws);
     ws.start.copy_from(state);
     newton::write_state(model, state, ws);
-    let retry = !report.status.is_success() || gains_energy(model, &ws.start, state, ws);
+    let whole_converged = report.status.is_success();
+    // a failed iterate's speeds mean nothing: its subdivision starts at 2
+    let first = if whole_converged {
+        rotation_substeps(model, state)
+    } else {
+        2
+    };
+    let retry = !whole_converged || first > 1 || gains_energy(model, &ws.start, state, ws);
     if !retry || model.options.max_subdivisions == 1 {
         return Ok(report);
     }
+    let ceiling = whole_converged.then(|| energy_ceiling(model, &ws.start, state));
     // keep the whole step (written above) unless a subdivision succeeds
     let mut s = ws.start.clone();
-    let whole_converged = report.status.is_success();
     Ok(
-        match subdivided(model, &mut s, ws, ctrl, forces, whole_converged)? {
+        match subdivided(
+            model,
+            &mut s,
+            ws,
+            ctrl,
+            forces,
+            whole_converged,
+            first,
+            ceiling,
+        )? {
             Ok(r) => {
                 *state = s;
                 StepReport {
@@ -159,6 +175,49 @@ pub(crate) fn long_solve(
     Ok((!gains_energy(&long, start, &next, ws)).then_some((next, report)))
 }
 
+/// The fewest sub-steps, a power of two (1: none), in which no body of the step that ended in
+/// `next` turns more than [`crate::Options::max_step_rotation`] per sub-step: `h |ω|` with
+/// `ω` the step's midpoint angular velocity, capped at `max_subdivisions`.
+///
+/// Why: the variational integrator's energy error grows with the rotation per step. Random
+/// stress scene 34, a sphere on a universal joint whose arm swings past the joint's first
+/// axis (its twist then whips to 80 rad/s, h |ω| = 0.79), gained 8.8% of its energy in 300
+/// steps of 10 ms, all converged; at 0.3 rad per step it gains 0.3% (17 of 300 steps taken
+/// as sub-steps). The Table V robots under random controls turn at most 0.12 rad per step
+/// (humanoid), 0.04 (A1), 0.014 (Panda) and 0.30 (the X2 tumbling) at h = 0.01.
+pub(crate) fn rotation_substeps(model: &Model, next: &State) -> u32 {
+    let o = &model.options;
+    let fastest = (1..model.nbody())
+        .map(|b| next.velocity(b).1.norm())
+        .fold(0.0, f64::max);
+    let rotation = o.timestep * fastest;
+    let mut n = 1;
+    while rotation > o.max_step_rotation * n as f64 && n < o.max_subdivisions {
+        n *= 2;
+    }
+    n.min(o.max_subdivisions)
+}
+
+/// Whether a converged step from `start` to `next` (solution in `ws`) must be taken again as
+/// sub-steps: it gained energy ([`gains_energy`]) or turned a body too far
+/// ([`rotation_substeps`]).
+pub(crate) fn suspect(model: &Model, start: &State, next: &State, ws: &Workspace) -> bool {
+    rotation_substeps(model, next) > 1 || gains_energy(model, start, next, ws)
+}
+
+/// The most total energy a subdivision of a converged whole step from `start` to `next` may
+/// end with: the larger of the two states' energies, plus `energy_guard (T + T⁺)`. Sub-steps
+/// under the same control and forces should land near the whole step, with less of its
+/// integration error; one that ends well above both found a spurious root. Random stress
+/// scene 760 (a ball-jointed link bouncing off the floor at 0.31 rad per step): the whole step
+/// ends at 17.45 J from 17.95 J, its two sub-steps at 21.96 J, each within the energy guard's
+/// allowance.
+pub(crate) fn energy_ceiling(model: &Model, start: &State, next: &State) -> f64 {
+    use crate::mechanics::{kinetic_energy, total_energy};
+    let kinetic = kinetic_energy(model, start) + kinetic_energy(model, next);
+    total_energy(model, start).max(total_energy(model, next)) + model.options.energy_guard * kinetic
+}
+
 /// Whether a converged step from `start` to `next` (applied impulses in `ws`) let its
 /// constraint impulses add more kinetic energy than [`crate::Options::energy_guard`] allows:
 /// the mark of a spurious root of the implicit step.
@@ -189,20 +248,30 @@ fn depenetration_work(model: &Model, ws: &Workspace) -> f64 {
         .sum()
 }
 
-/// A step whose solve failed (or gained energy, [`gains_energy`]), taken again as `n` = 2, 4, …
-/// ≤ `max_subdivisions` equal sub-steps from `state` under the same control and forces. On
-/// success `state` holds the end of the last sub-step with the impulses summed over the
-/// sub-steps ([`State::add_impulses`]) and the report; otherwise `Err(iterations spent)` and
-/// `state` is untouched.
+/// A step whose solve failed (or was [`suspect`]), taken again as `n` = `first` (≥ 2, from
+/// [`rotation_substeps`]), then finer, ≤ `max_subdivisions` equal sub-steps from `state` under
+/// the same control and forces. On success `state` holds the end of the last sub-step with the
+/// impulses summed over the sub-steps ([`State::add_impulses`]) and the report; otherwise
+/// `Err(iterations spent)` and `state` is untouched.
 ///
-/// The first subdivision whose sub-steps all converge without gaining energy is taken. When the
-/// whole step converged but gained energy (`guard`), the whole step is kept if none does. A
-/// whole step that failed falls back to the first subdivision that converged although it gained
-/// energy (after trying one finer subdivision), since a converged step beats a failed one (the shared humanoid's first step from its
-/// `squat` keyframe, where 8 contact candidates start up to 0.35 mm inside the floor, gains
-/// 7.3 J as the contacts push them out, and converges in 8 sub-steps). Taking the first
-/// converged subdivision outright instead kept spurious roots: random scene 34's step 30 ended
-/// at 29.30 J in 2 sub-steps where 4, 8, 16, 64 sub-steps give 26.65, 26.43, 26.39, 26.37 J.
+/// An attempt whose sub-step fails is followed by one twice as fine. The first attempt whose
+/// sub-steps all converge, none gaining energy or turning a body further than
+/// `max_step_rotation`, is taken. A converged attempt that does not pass is the fallback, and
+/// one finer attempt is tried (twice as fine after an energy gain, as fine as the rotation
+/// needs after a fast turn); if it does not pass either, the fallback is taken. Then:
+/// - a converged whole step is kept when no attempt converged (`guard`: energy-gaining
+///   sub-steps count as failed), or when an attempt ends above `ceiling`
+///   ([`energy_ceiling`]);
+/// - a failed whole step takes the fallback: a converged step beats a failed one (the shared
+///   humanoid's first step from its `squat` keyframe, where 8 contact candidates start up to
+///   0.35 mm inside the floor, gains 7.3 J as the contacts push them out, and converges in 8
+///   sub-steps).
+///
+/// Taking the first converged subdivision outright instead kept spurious roots: random scene
+/// 34's step 30 ended at 29.30 J in 2 sub-steps where 4, 8, 16, 64 sub-steps give 26.65, 26.43,
+/// 26.39, 26.37 J. Jumping past a converged subdivision to the one the rotation asks for lost
+/// steps: random scene 613's step 83 converges in 2 sub-steps and in none of 8, 16 or 32.
+#[allow(clippy::too_many_arguments)]
 fn subdivided(
     model: &Model,
     state: &mut State,
@@ -210,9 +279,13 @@ fn subdivided(
     ctrl: &[f64],
     forces: &AppliedForces,
     guard: bool,
+    first: u32,
+    ceiling: Option<f64>,
 ) -> Result<std::result::Result<StepReport, usize>> {
     let mut none = |_: u32, _: usize, _: &State, _: &Workspace, _: StepReport| {};
-    subdivided_with(model, state, ws, ctrl, forces, guard, false, &mut none)
+    subdivided_with(
+        model, state, ws, ctrl, forces, guard, first, ceiling, false, &mut none,
+    )
 }
 
 /// [`subdivided`], calling `solved(n, i, start, ws, report)` after sub-step `i` of an attempt
@@ -228,14 +301,17 @@ pub(crate) fn subdivided_with(
     ctrl: &[f64],
     forces: &AppliedForces,
     guard: bool,
+    first: u32,
+    ceiling: Option<f64>,
     replay: bool,
     solved: &mut dyn FnMut(u32, usize, &State, &Workspace, StepReport),
 ) -> Result<std::result::Result<StepReport, usize>> {
+    let most = model.options.max_subdivisions;
     let mut iterations = 0;
     let mut fallback: Option<(u32, State, StepReport)> = None;
-    let mut n = 2;
-    while n <= model.options.max_subdivisions {
-        match attempt(
+    let mut n = first.max(2);
+    while n <= most {
+        let outcome = attempt(
             model,
             state,
             ws,
@@ -245,24 +321,42 @@ pub(crate) fn subdivided_with(
             guard,
             solved,
             &mut iterations,
-        )? {
-            Some((end, report, false)) => {
-                *state = end;
-                return Ok(Ok(StepReport {
-                    iterations,
-                    ..report
-                }));
+        )?;
+        let next_n = match outcome {
+            Attempt::Failed => 2 * n,
+            Attempt::Done { end, .. }
+                if ceiling.is_some_and(|c| crate::mechanics::total_energy(model, &end) > c) =>
+            {
+                // a spurious root of the sub-steps: finer ones rarely do better
+                return Ok(Err(iterations));
             }
-            Some((end, report, true)) if fallback.is_none() => fallback = Some((n, end, report)),
-            _ => {}
-        }
+            Attempt::Done {
+                end,
+                report,
+                gained,
+                finer,
+            } => {
+                let finer = if n < most { finer } else { 1 };
+                if !gained && finer == 1 {
+                    *state = *end;
+                    return Ok(Ok(StepReport {
+                        iterations,
+                        ..report
+                    }));
+                }
+                if fallback.is_none() {
+                    fallback = Some((n, *end, report));
+                }
+                (n * finer).clamp(2 * n, most.max(2 * n))
+            }
+        };
         // past a converged fallback, one finer subdivision is tried for an energy-consistent
-        // step (the shared humanoid's squat start gains energy at every subdivision: trying all
-        // of them doubled its cost)
-        if fallback.as_ref().is_some_and(|(m, _, _)| n >= 2 * m) {
+        // step, or for one that turns no body too far (the shared humanoid's squat start gains
+        // energy at every subdivision: trying all of them doubled its cost)
+        if fallback.as_ref().is_some_and(|(m, _, _)| n > *m) {
             break;
         }
-        n *= 2;
+        n = next_n;
     }
     let Some((n, end, report)) = fallback else {
         return Ok(Err(iterations));
@@ -281,8 +375,8 @@ pub(crate) fn subdivided_with(
             solved,
             &mut iterations,
         )?;
-        if let Some((same, _, _)) = again {
-            end = same;
+        if let Attempt::Done { end: same, .. } = again {
+            end = *same;
         }
     }
     *state = end;
@@ -292,9 +386,24 @@ pub(crate) fn subdivided_with(
     }))
 }
 
-/// One attempt of [`subdivided_with`]: the step from `state` as `n` sub-steps. `None` when a
-/// sub-step fails, or gains energy with `stop_on_energy`; else the end state (impulses summed
-/// over the sub-steps), its report and whether a sub-step gained energy.
+/// What one attempt of [`subdivided_with`] came to.
+enum Attempt {
+    /// A sub-step failed, or gained energy ([`gains_energy`]) with `stop_on_energy`.
+    Failed,
+    /// Every sub-step converged.
+    Done {
+        /// The end state (impulses summed over the sub-steps).
+        end: Box<State>,
+        report: StepReport,
+        /// Whether a sub-step gained energy.
+        gained: bool,
+        /// How many times finer the sub-steps must be for none to turn a body further than
+        /// `max_step_rotation` ([`rotation_substeps`]; 1: they are fine).
+        finer: u32,
+    },
+}
+
+/// One attempt of [`subdivided_with`]: the step from `state` as `n` sub-steps.
 #[allow(clippy::too_many_arguments)]
 fn attempt(
     model: &Model,
@@ -306,7 +415,7 @@ fn attempt(
     stop_on_energy: bool,
     solved: &mut dyn FnMut(u32, usize, &State, &Workspace, StepReport),
     iterations: &mut usize,
-) -> Result<Option<(State, StepReport, bool)>> {
+) -> Result<Attempt> {
     let sub = substep_model(model, n)?;
     let mut report = StepReport {
         status: SolveStatus::Converged,
@@ -319,7 +428,7 @@ fn attempt(
     let mut s = state.clone();
     // the interval of the state's velocities in units of the sub-step
     s.interval = s.interval.map(|i| i * n as f64);
-    let mut gained = false;
+    let (mut gained, mut finer) = (false, 1);
     for i in 0..n as usize {
         newton::prepare(&sub, &s, ws, ctrl, forces);
         let r = newton::solve(&sub, &s, ws);
@@ -327,14 +436,15 @@ fn attempt(
         let mut next = s.clone();
         newton::write_state(&sub, &mut next, ws);
         if !r.status.is_success() {
-            return Ok(None);
+            return Ok(Attempt::Failed);
         }
         if gains_energy(&sub, &s, &next, ws) {
             if stop_on_energy {
-                return Ok(None);
+                return Ok(Attempt::Failed);
             }
             gained = true;
         }
+        finer = finer.max(rotation_substeps(&sub, &next));
         solved(n, i, &s, ws, r);
         if r.status == SolveStatus::Acceptable {
             report.status = SolveStatus::Acceptable;
@@ -351,7 +461,12 @@ fn attempt(
     s.time = state.time + model.options.timestep;
     // the velocities are the last sub-step's: an interval of h / n
     s.interval = Some(1.0 / n as f64);
-    Ok(Some((s, report, gained)))
+    Ok(Attempt::Done {
+        end: Box::new(s),
+        report,
+        gained,
+        finer,
+    })
 }
 
 /// The model a step of `model` is subdivided into: the same with time step `h / n`.
@@ -412,6 +527,13 @@ mod tests {
             .joint(JointSpec::new("free", JointKind::Floating, "world", "b"))
             .compile()
             .unwrap();
+        // whole steps between the forced subdivisions (this spin turns 0.62 rad a step)
+        let model = model
+            .with_options(crate::Options {
+                max_step_rotation: f64::INFINITY,
+                ..model.options.clone()
+            })
+            .unwrap();
         let mut state = State::reference(&model);
         state.set_velocity(1, &Vector3::zeros(), &Vector3::new(30.0, -50.0, 20.0));
         let mut ws = Workspace::new(&model);
@@ -425,7 +547,7 @@ mod tests {
                 // take this step as n sub-steps, as `step` does after a failed solve
                 let n = 2u32.pow(1 + k % 2);
                 let mut none = |_: u32, _: usize, _: &State, _: &Workspace, _: StepReport| {};
-                let (end, _, gained) = attempt(
+                let done = attempt(
                     &model,
                     &state,
                     &mut ws,
@@ -436,10 +558,12 @@ mod tests {
                     &mut none,
                     &mut 0,
                 )
-                .unwrap()
                 .unwrap();
+                let Attempt::Done { end, gained, .. } = done else {
+                    panic!("step {k}: an attempt failed");
+                };
                 assert!(!gained);
-                state = end;
+                state = *end;
             } else {
                 assert!(
                     step(&model, &mut state, &mut ws, &[])
@@ -457,5 +581,47 @@ mod tests {
             let z = state.pose(1).pos.z;
             assert!((z - exact(state.time)).abs() < 1e-12, "step {k}: z {z}");
         }
+    }
+
+    /// A body turning ~0.6 rad a step (61.6 rad/s at h = 0.01, |ω| varying as it tumbles) is
+    /// taken as sub-steps that turn it at most `max_step_rotation` = 0.3 rad each. The
+    /// sub-steps are steps of the variational integrator, so the tumble keeps its discrete
+    /// angular momentum exactly across them and across the switches between step lengths.
+    #[test]
+    fn fast_turns_are_subdivided_and_keep_the_discrete_momenta() {
+        let model = ModelBuilder::new()
+            .timestep(0.01)
+            .gravity([0.0, 0.0, 0.0])
+            .body(BodySpec::new("b", 2.0, [0.3, 0.1, 0.2]).pos([0.0, 0.0, 1.0]))
+            .joint(JointSpec::new("free", JointKind::Floating, "world", "b"))
+            .compile()
+            .unwrap();
+        assert_eq!(model.options.max_step_rotation, 0.3);
+        let mut state = State::reference(&model);
+        state.set_velocity(1, &Vector3::zeros(), &Vector3::new(30.0, -50.0, 20.0));
+        let mut ws = Workspace::new(&model);
+        let mut l0 = None;
+        for k in 0..20 {
+            let report = step(&model, &mut state, &mut ws, &[]).unwrap();
+            assert!(report.status.is_success(), "step {k}");
+            let n = report.subdivisions;
+            let turn = state.velocity(1).1.norm() * 0.01 / n as f64;
+            assert!(
+                n >= 2 && turn <= 0.3,
+                "step {k}: {n} sub-steps of {turn} rad"
+            );
+            let l = crate::mechanics::angular_momentum(&model, &state);
+            let l0 = *l0.get_or_insert(l);
+            assert!((l - l0).norm() < 1e-10 * l0.norm(), "step {k}");
+        }
+        // the limit off: whole steps
+        let whole = model
+            .with_options(crate::Options {
+                max_step_rotation: f64::INFINITY,
+                ..model.options.clone()
+            })
+            .unwrap();
+        let report = step(&whole, &mut state, &mut Workspace::new(&whole), &[]).unwrap();
+        assert_eq!(report.subdivisions, 1);
     }
 }

@@ -1,5 +1,5 @@
 //! Drops on the floor at dt = 0.1, 0.01, 0.001: never below -1e-8 m, and at rest the bodies stay
-//! put (velocity < 1e-8 m/s after settling); solver iterations reported and bounded by 30.
+//! put (velocity < 1e-8 m/s after settling); solver iterations reported and bounded by 35.
 #[path = "common/contact.rs"]
 mod common;
 use common::*;
@@ -53,8 +53,12 @@ fn check(name: &str, shape: Shape, quat: [f64; 4]) {
             r.final_speed
         );
         assert!(creep < 1e-8, "{name} dt {h}: crept {creep:.3e} m at rest");
+        // 30 before the blocking cones were moved to the central path (`central::unblock`):
+        // the corner drop's hardest step at dt 0.1 (t = 1.9 s, tipping onto a face) now goes
+        // on from its warm start through one move instead of failing it and converging cold,
+        // 33 iterations instead of 26
         assert!(
-            r.max_iterations <= 30,
+            r.max_iterations <= 35,
             "{name} dt {h}: {} iterations",
             r.max_iterations
         );

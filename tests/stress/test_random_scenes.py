@@ -48,3 +48,16 @@ def test_a_stall_next_to_a_sliding_cone_is_rescued():
     tr = ukemi.rollout(m, m.make_state(), nsteps=52, on_failure="return")
     assert tr.converged
     assert_stable(m, tr, energy_gain=MECHANISM_ENERGY_GAIN)
+
+
+def test_a_contact_whose_slip_must_turn_is_unblocked():
+    """Random scene 955 step 94 (a 3-link chain sliding on the floor): a nearly sticking
+    contact (slip 5e-5 m/s) whose slip and friction must turn by ~100°, with both members of
+    its friction cone pair next to their boundaries, cut every interior-point step to ~1e-4 of
+    the Newton step and the solve failed at every attempt and subdivision (measured
+    2026-12-02). Moving the cones that block the direction onto the central path at the
+    current mean complementarity (engine/src/solver/central.rs, `unblock`) lets it converge."""
+    m, _ = random_scene(955)
+    tr = ukemi.rollout(m, m.make_state(), nsteps=95, on_failure="return")
+    assert tr.converged
+    assert_stable(m, tr, energy_gain=MECHANISM_ENERGY_GAIN)

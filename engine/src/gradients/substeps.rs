@@ -34,7 +34,10 @@ use crate::model::Model;
 use crate::model::params::Param;
 use crate::solver::newton;
 use crate::state::{State, StepReport, Workspace};
-use crate::step::{AppliedForces, gains_energy, long_solve, subdivided_with, substep_model};
+use crate::step::{
+    AppliedForces, energy_ceiling, long_solve, rotation_substeps, subdivided_with, substep_model,
+    suspect,
+};
 use crate::{Result, ensure};
 
 /// What a forward pass keeps of a subdivided step: each sub-step's start and solution.
@@ -55,7 +58,8 @@ impl StoredSubsteps {
 }
 
 /// What [`crate::step`] makes of a whole-step solve from `state` (solution in `ws`, report
-/// `whole`): kept when it converged and did not gain energy ([`gains_energy`]), else taken as
+/// `whole`): kept when it converged and is not [`suspect`] (gained energy, or turned a body
+/// further than `max_step_rotation`), else taken as
 /// sub-steps when `max_subdivisions` allows and a subdivision succeeds, else kept if it
 /// converged, else an error. A kept whole step's solution is in `ws` (as after its solve) and
 /// in the returned [`StoredSolution`].
@@ -68,20 +72,21 @@ pub(crate) fn retry(
 ) -> Result<StoredStep> {
     let solution = StoredSolution::of(ws, whole);
     let converged = whole.status.is_success();
-    if converged && model.options.energy_guard > 0.0 {
+    let (mut first, mut ceiling) = (2, None);
+    if converged {
         let mut next = state.clone();
         newton::write_state(model, &mut next, ws);
-        if !gains_energy(model, state, &next, ws) {
+        if !suspect(model, state, &next, ws) {
             return Ok(StoredStep::Whole(solution));
         }
-    } else if converged {
-        return Ok(StoredStep::Whole(solution));
+        first = rotation_substeps(model, &next);
+        ceiling = Some(energy_ceiling(model, state, &next));
     }
     if model.options.max_subdivisions == 1 {
         ensure!(converged, not_converged("step", whole));
         return Ok(StoredStep::Whole(solution));
     }
-    match solve(model, state, ws, ctrl, whole) {
+    match solve(model, state, ws, ctrl, whole, first, ceiling) {
         Ok(sub) => Ok(StoredStep::Substeps(sub)),
         Err(e) if !converged => {
             match long_solve(model, state, ws, ctrl, &Default::default(), false)? {
@@ -109,6 +114,8 @@ pub(crate) fn solve(
     ws: &mut Workspace,
     ctrl: &[f64],
     failed: StepReport,
+    first: u32,
+    ceiling: Option<f64>,
 ) -> Result<StoredSubsteps> {
     let (mut starts, mut solutions) = (Vec::new(), Vec::new());
     let mut next = state.clone();
@@ -119,6 +126,8 @@ pub(crate) fn solve(
         ctrl,
         &AppliedForces::default(),
         failed.status.is_success(),
+        first,
+        ceiling,
         true,
         &mut |_, i, start, ws, report| {
             if i == 0 {

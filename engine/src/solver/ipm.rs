@@ -7,7 +7,10 @@
 //! corrector direction targets κ with Mehrotra's second-order term `Δb_aff ∘ Δc_aff`. The step is
 //! cut to a fraction τ of the distance to the cone boundary and to the angular-speed domain, then
 //! backtracked until the centred residual `‖r(w, κ)‖` decreases. Convergence is judged by the
-//! violation metrics of eqs. 49-50.
+//! violation metrics of eqs. 49-50. When the line search fails, or three steps in a row are
+//! shorter than 1e-3, the cones that block the direction are moved onto the central path at
+//! the current mean complementarity ([`super::central::unblock`]; at most five times a solve)
+//! and the iteration goes on from there.
 //! The unknowns are velocities, so every iterate's orientation `q ⊗ f(ω⁺)` is exactly unit
 //! (the quaternion-aware update of eq. 48 holds by construction).
 use super::inequality::{
@@ -27,6 +30,12 @@ pub(crate) const NT_MU_FLOOR: f64 = 1e-8;
 
 /// Iterative-refinement rounds of every Newton direction (see `BlockMatrix::solve_refined`).
 pub(crate) const REFINE_ROUNDS: usize = 2;
+
+/// Moves of blocking cones onto the central path per solve ([`super::central::unblock`]), made
+/// when the line search fails or `SHORT_COUNT` consecutive steps are shorter than `SHORT_STEP`.
+const MAX_UNBLOCKS: usize = 5;
+const SHORT_COUNT: usize = 3;
+const SHORT_STEP: f64 = 1e-3;
 
 /// Largest fraction to the boundary.
 const TAU_CAP: f64 = 1.0 - 1e-6;
@@ -65,6 +74,7 @@ pub(crate) fn solve_to(
         complementarity: vio.k,
         subdivisions: 1,
     };
+    let (mut unblocked, mut short) = (0, 0);
     for it in 0..o.max_iter {
         if !(vio.r.is_finite() && vio.k.is_finite()) {
             report.status = SolveStatus::NonFinite;
@@ -150,6 +160,25 @@ pub(crate) fn solve_to(
         }
         // (the line search evaluated an accepted iterate last: no evaluation then)
         vio = recentre(model, state, ws, 0.0);
+        // a run of short steps (or none) behind blocking cones: move those onto the central path
+        short = if accepted.is_none_or(|a| a < SHORT_STEP) {
+            short + 1
+        } else {
+            0
+        };
+        let stuck = accepted.is_none() || short >= SHORT_COUNT;
+        let acceptable = vio.r < o.acceptable_rtol && vio.k < o.acceptable_kappa_tol;
+        if stuck
+            && central.is_none()
+            && !acceptable
+            && unblocked < MAX_UNBLOCKS
+            && super::central::unblock(model, state, ws, mu.max(floor)) > 0
+        {
+            unblocked += 1;
+            short = 0;
+            vio = evaluate_kept(model, state, ws, false, 0.0);
+            continue;
+        }
         if accepted.is_none() {
             report.status = SolveStatus::LineSearchFailed;
             break;

@@ -61,6 +61,8 @@ pub fn free_body(
 #[derive(Debug, Default)]
 pub struct Run {
     pub min_distance: f64,
+    /// Most iterations of one solve: a step taken as `n` sub-steps (a fast turn, a failed
+    /// whole solve) counts its iterations over `n`.
     pub max_iterations: usize,
     pub mean_iterations: f64,
     pub final_speed: f64,
@@ -82,7 +84,8 @@ pub fn run(model: &Model, state: &mut State, n: usize) -> Run {
             "t = {}: {r:?}",
             state.time
         );
-        out.max_iterations = out.max_iterations.max(r.iterations);
+        let per_solve = r.iterations.div_ceil(r.subdivisions as usize);
+        out.max_iterations = out.max_iterations.max(per_solve);
         total += r.iterations;
         let d = contact::signed_distances(model, state);
         out.min_distance = d.iter().copied().fold(out.min_distance, f64::min);
