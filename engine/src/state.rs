@@ -394,6 +394,9 @@ pub struct Workspace {
     /// held on the cone's boundary after the interior-point solve (see
     /// `solver::saturation`); `None` for complementarity rows.
     pub(crate) saturated: Vec<Option<[f64; 2]>>,
+    /// Per contact candidate, then per joint: whether its complementarity pairs block the
+    /// interior-point direction (`solver::central::unblock`'s scratch).
+    pub(crate) blocking: Vec<bool>,
     pub(crate) topology_id: u64,
     /// Nesterov–Todd scaling of each contact's friction-cone pair at the current interior-point
     /// iterate (`None`: unscaled rows), used while `nt_on` (the IPM's directions; the
@@ -472,6 +475,7 @@ impl Workspace {
             delta_aff: vec![0.0; n],
             active: vec![true; model.ncontact()],
             saturated: vec![None; model.ncontact()],
+            blocking: vec![false; model.ncontact() + model.joints.len()],
             matrix: BlockMatrix::new(&t.pattern),
             w: vec![0.0; n],
             w_trial: vec![0.0; n],

@@ -12,7 +12,8 @@
 use nalgebra::Vector3;
 
 use super::inequality::{
-    add_mehrotra_correction, cone_search, mean_complementarity, scale_soc_rows, update_scalings,
+    add_mehrotra_correction, cone_search, for_each_owned_pair, mean_complementarity,
+    scale_soc_rows, update_scalings,
 };
 use super::ipm;
 use super::newton::{Violation, assemble, evaluate};
@@ -266,40 +267,54 @@ fn centre_some(
 /// `O(κ / |b|)` and can turn.
 pub(crate) fn unblock(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> usize {
     const BLOCKING: f64 = 10.0;
-    let t = &model.topology;
-    // step to the boundary of the cones of each pair, by the pair's node-block offset
-    let mut reach: Vec<(usize, f64)> = Vec::new();
-    let (w, d) = (&ws.w, &ws.delta);
-    super::inequality::for_each_pair_except(model, &ws.active, &ws.saturated, |o, p, q, _, soc| {
-        let a = if soc {
+    // each pair's step along `ws.delta` to its cones' boundary, twice: the shortest, then the
+    // owners of the pairs within BLOCKING times it
+    let reach = |w: &[f64], d: &[f64], o: usize, p: usize, q: usize, soc: bool| {
+        if soc {
             let v = |x: &[f64], i: usize| Vector3::new(x[i], x[i + 1], x[i + 2]);
             soc_step(&v(w, o + p), &v(d, o + p), 1.0).min(soc_step(&v(w, o + q), &v(d, o + q), 1.0))
         } else {
             orthant_step(&[w[o + p], w[o + q]], &[d[o + p], d[o + q]], 1.0)
-        };
-        reach.push((o, a));
-    });
-    let shortest = reach.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
+        }
+    };
+    let mut shortest: f64 = f64::INFINITY;
+    let (w, d) = (&ws.w, &ws.delta);
+    for_each_owned_pair(
+        model,
+        &ws.active,
+        &ws.saturated,
+        |owner, o, p, q, _, soc| {
+            if owner.is_some() {
+                shortest = shortest.min(reach(w, d, o, p, q, soc));
+            }
+        },
+    );
     if shortest.is_nan() || shortest >= 1.0 {
         return 0;
     }
-    // a node blocks if a pair in its block [start, start + len) does
-    let blocks = |start: usize, len: usize| {
-        reach
-            .iter()
-            .any(|&(o, a)| (start..start + len).contains(&o) && a <= BLOCKING * shortest)
-    };
-    let contacts: Vec<bool> = (0..model.ncontact())
-        .map(|c| {
-            let n = t.contact_node[c];
-            ws.active[c] && blocks(t.pattern.offset(n), t.pattern.dim(n))
-        })
-        .collect();
-    let limits: Vec<bool> = (0..model.joints.len())
-        .map(|j| t.limit_node[j].is_some_and(|n| blocks(t.pattern.offset(n), t.pattern.dim(n))))
-        .collect();
-    let count = contacts.iter().chain(&limits).filter(|&&b| b).count();
-    centre_some(model, state, ws, kappa, |c| contacts[c], |j| limits[j]);
+    let mut blocking = std::mem::take(&mut ws.blocking);
+    blocking.fill(false);
+    for_each_owned_pair(
+        model,
+        &ws.active,
+        &ws.saturated,
+        |owner, o, p, q, _, soc| {
+            if let Some(i) = owner {
+                blocking[i] |= reach(w, d, o, p, q, soc) <= BLOCKING * shortest;
+            }
+        },
+    );
+    let count = blocking.iter().filter(|&&b| b).count();
+    let nc = model.ncontact();
+    centre_some(
+        model,
+        state,
+        ws,
+        kappa,
+        |c| blocking[c],
+        |j| blocking[nc + j],
+    );
+    ws.blocking = blocking;
     count
 }
 

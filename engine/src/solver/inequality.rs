@@ -61,6 +61,19 @@ pub(crate) fn for_each_pair_except(
     saturated: &[Option<[f64; 2]>],
     mut f: impl FnMut(usize, usize, usize, usize, bool),
 ) {
+    for_each_owned_pair(model, active, saturated, |_, o, p, d, r, soc| {
+        f(o, p, d, r, soc)
+    });
+}
+
+/// [`for_each_pair_except`], also passing who owns the pair: `Some(c)` for contact candidate
+/// `c`, `Some(ncontact + j)` for a limit of joint `j`, `None` for a tendon limit.
+pub(crate) fn for_each_owned_pair(
+    model: &Model,
+    active: &[bool],
+    saturated: &[Option<[f64; 2]>],
+    mut f: impl FnMut(Option<usize>, usize, usize, usize, usize, bool),
+) {
     let t = &model.topology;
     for (c, contact) in model.contacts.iter().enumerate() {
         if !active[c] {
@@ -68,26 +81,27 @@ pub(crate) fn for_each_pair_except(
         }
         let o = t.pattern.offset(t.contact_node[c]);
         for &(p, d, r) in orthant_pairs(contact.model) {
-            f(o, p, d, r, false);
+            f(Some(c), o, p, d, r, false);
         }
         let held = saturated.get(c).is_some_and(|s| s.is_some());
         if contact.model == ContactModel::Nonlinear && !held {
-            f(o, SOC.0, SOC.1, SOC.2, true);
+            f(Some(c), o, SOC.0, SOC.1, SOC.2, true);
         }
     }
+    let nc = model.ncontact();
     for (j, joint) in model.joints.iter().enumerate() {
         if let Some(n) = t.limit_node[j] {
             let o = t.pattern.offset(n);
             for i in 0..joint.limits.len() {
                 for &(p, d, r) in &LIMIT_PAIRS {
-                    f(o + 4 * i, p, d, r, false);
+                    f(Some(nc + j), o + 4 * i, p, d, r, false);
                 }
             }
         }
     }
     for &n in &t.tendon_node {
         for &(p, d, r) in &LIMIT_PAIRS {
-            f(t.pattern.offset(n), p, d, r, false);
+            f(None, t.pattern.offset(n), p, d, r, false);
         }
     }
 }
@@ -136,6 +150,24 @@ pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm:
         }
     });
     // other node entries (the ψ-slack pairs are covered above; nothing else is free)
+}
+
+/// Push every complementarity pair of the iterate at least `impulse` (its impulse member: γ,
+/// ξ) and `slack` (its gap or slip member: s, η) inside its cone (see `ipm::WIDEN_BELOW`).
+pub(crate) fn widen(model: &Model, ws: &mut Workspace, impulse: f64, slack: f64) {
+    let w = &mut ws.w;
+    for_each_pair_except(model, &ws.active, &ws.saturated, |o, p, d, _, soc| {
+        if soc {
+            for (start, m) in [(o + p, impulse), (o + d, slack)] {
+                let mut y = v3(w, start);
+                crate::contact::cone::soc_interior(&mut y, m);
+                w[start..start + 3].copy_from_slice(y.as_slice());
+            }
+        } else {
+            w[o + p] = w[o + p].max(impulse);
+            w[o + d] = w[o + d].max(slack);
+        }
+    });
 }
 
 /// Contact frames at the current configuration (impulse directions, tangential velocity map),
