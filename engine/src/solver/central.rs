@@ -414,4 +414,78 @@ mod tests {
         assert_eq!(orthant_pair(0.0, -1e-3, kappa), (1e-2, 1e-2));
         assert_eq!(orthant_pair(f64::NAN, 0.1, kappa), (1e-2, 1e-2));
     }
+
+    /// `unblock` moves exactly the candidates whose cones stop the direction (within 10x the
+    /// shortest step to a boundary) onto the central path at κ, and leaves every other pair
+    /// and the velocities alone.
+    #[test]
+    fn unblock_centres_the_blocking_cones_only() {
+        use crate::contact::ContactModel;
+        use crate::{BodySpec, GeomSpec, JointKind, JointSpec, ModelBuilder, Shape};
+        let model = ModelBuilder::new()
+            .timestep(0.01)
+            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.8))
+            .body(BodySpec::new("box", 1.0, [0.1, 0.1, 0.1]).pos([0.0, 0.0, 0.1]))
+            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
+            .geom(
+                GeomSpec::new(
+                    "box",
+                    "box",
+                    Shape::Box {
+                        half_extents: nalgebra::Vector3::new(0.1, 0.1, 0.1),
+                    },
+                )
+                .model(Some(ContactModel::Nonlinear)),
+            )
+            .compile()
+            .unwrap();
+        let state = State::reference(&model);
+        let mut ws = Workspace::new(&model);
+        crate::solver::newton::prepare(&model, &state, &mut ws, &[], &Default::default());
+        ws.active.fill(true);
+        let t = &model.topology;
+        let offset = |c: usize| t.pattern.offset(t.contact_node[c]);
+        // every pair well inside; candidate 1's friction pair next to its boundaries
+        for c in 0..model.ncontact() {
+            let o = offset(c);
+            ws.w[o..o + 8].copy_from_slice(&[0.2, 0.3, 0.16, 0.05, 0.0, 0.4, 0.1, 0.0]);
+        }
+        let o1 = offset(1);
+        ws.w[o1 + 2..o1 + 8].copy_from_slice(&[0.16, 0.16 - 1e-9, 0.0, 0.01, -0.01 + 1e-9, 0.0]);
+        // a direction that turns candidate 1's friction and slip (and moves the rest a little)
+        ws.delta.fill(0.0);
+        for c in 0..model.ncontact() {
+            ws.delta[offset(c)] = -0.01;
+        }
+        ws.delta[o1 + 4] = 0.1;
+        ws.delta[o1 + 7] = 0.1;
+        let before = ws.w.clone();
+        let kappa = 1e-6;
+        assert_eq!(unblock(&model, &state, &mut ws, kappa), 1);
+        for c in 0..model.ncontact() {
+            let o = offset(c);
+            if c == 1 {
+                let (xi, eta) = (
+                    Vector3::new(ws.w[o + 2], ws.w[o + 3], ws.w[o + 4]),
+                    Vector3::new(ws.w[o + 5], ws.w[o + 6], ws.w[o + 7]),
+                );
+                let prod = soc_product(&xi, &eta);
+                assert!(
+                    (prod - Vector3::new(kappa, 0.0, 0.0)).norm() < 1e-12,
+                    "{prod}"
+                );
+                assert!(soc_det(&xi) > 0.0 && soc_det(&eta) > 0.0);
+                assert!((xi[0] - 0.8 * ws.w[o]).abs() < 1e-15, "ξ₁ = μγ");
+                assert!((ws.w[o] * ws.w[o + 1] - kappa).abs() < 1e-15);
+            } else {
+                assert_eq!(ws.w[o..o + 8], before[o..o + 8], "candidate {c}");
+            }
+        }
+        assert_eq!(ws.w[..t.smooth_dim], before[..t.smooth_dim]);
+        // a direction that leaves no cone: nothing moves
+        ws.delta.fill(0.0);
+        let kept = ws.w.clone();
+        assert_eq!(unblock(&model, &state, &mut ws, kappa), 0);
+        assert_eq!(ws.w, kept);
+    }
 }
