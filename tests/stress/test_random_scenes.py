@@ -20,8 +20,8 @@ NSTEPS = steps(100, 300)
 # integrator conserves a nearby (shadow) energy, and the discrete one oscillates by O(h²)
 # (1.5% for the 1:1000 chain in test_stacks, 0.6% for the double pendulum in the study).
 MECHANISM_ENERGY_GAIN = 5e-2
-REASON = ("engine limit (README 'Known limits': fast-spinning chains' energy error at h|ω| ~ 0.3-1, "
-          "a few jammed solves); measured over 300 steps: ")
+REASON = ("engine limit (README 'Known limits': a frictional jam with no finite solution of the "
+          "discrete step); measured over 300 steps: ")
 
 
 def check(seed: int, nsteps: int = NSTEPS):
