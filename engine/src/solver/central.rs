@@ -127,7 +127,7 @@ fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepR
         ws.delta_aff.copy_from_slice(&ws.residual);
         ws.delta_aff.iter_mut().for_each(|d| *d = -*d);
         ws.matrix
-            .solve_refined(p, &mut ws.delta_aff, ipm::REFINE_ROUNDS);
+            .solve_refined(p, &mut ws.delta_aff, ipm::REFINE_ROUNDS, ipm::REFINE_ENOUGH);
         ws.delta.copy_from_slice(&ws.residual);
         add_mehrotra_correction(model, &ws.active, &ws.nt, &ws.delta_aff, &mut ws.delta);
         ipm::solve_negated(ws, p);

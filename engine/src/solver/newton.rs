@@ -788,6 +788,7 @@ fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport 
             &model.topology.pattern,
             &mut ws.delta,
             super::ipm::REFINE_ROUNDS,
+            super::ipm::REFINE_ENOUGH,
         );
         let mut alpha = spin_limited_step(model, ws);
         let mut accepted = false;
