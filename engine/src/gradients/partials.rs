@@ -212,7 +212,7 @@ fn steps(model: &Model, inputs: &[Input]) -> Vec<f64> {
 
 /// Row supports of every input column.
 fn supports(model: &Model, probe: &mut Probe, inputs: &[Input], eps: &[f64]) -> Vec<Support> {
-    let graph = Interactions::new(model);
+    let graph = Interactions::new(model, &probe.ws.active.clone());
     let all: Vec<usize> = (1..model.nbody()).collect();
     inputs
         .iter()

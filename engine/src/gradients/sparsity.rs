@@ -14,19 +14,23 @@ use crate::model::Model;
 use crate::model::Transmission;
 use crate::model::topology_body_node as body_node;
 
-/// Which bodies interact with which, and which contact candidates each body and geom has.
+/// Which bodies interact with which, and which active contact candidates each body and geom
+/// has.
 pub(super) struct Interactions {
     /// Neighbours of each body through joints, couplings and transmissions (itself included),
     /// sorted.
     nbrs: Vec<Vec<usize>>,
-    /// Contact candidates of each body.
+    /// Active contact candidates of each body.
     body_contacts: Vec<Vec<usize>>,
-    /// Contact candidates of each geom.
+    /// Active contact candidates of each geom.
     pub geom_contacts: Vec<Vec<usize>>,
 }
 
 impl Interactions {
-    pub fn new(model: &Model) -> Interactions {
+    /// The graph of `model` with the contact candidates `active` (the activation frozen for the
+    /// linearisation: an inactive candidate's rows are constant, so it is in no support; on
+    /// the humanoid the inactive ones linked nearly every body to every other).
+    pub fn new(model: &Model, active: &[bool]) -> Interactions {
         let nb = model.nbody();
         let mut nbrs: Vec<Vec<usize>> = (0..nb).map(|b| vec![b]).collect();
         let mut link = |group: &[usize]| {
@@ -45,7 +49,12 @@ impl Interactions {
         }
         let mut body_contacts = vec![Vec::new(); nb];
         let mut geom_contacts = vec![Vec::new(); model.geoms.len()];
-        for (c, contact) in model.contacts.iter().enumerate() {
+        for (c, contact) in model
+            .contacts
+            .iter()
+            .enumerate()
+            .filter(|&(c, _)| active[c])
+        {
             // NOTE: no link: a contact changes only when its geometry moves, and then its own
             // rows and the rows of its two bodies are in the support (see `Support::new`)
             let [a, b] = model.topology.contact_bodies[c];
