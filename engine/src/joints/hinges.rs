@@ -65,12 +65,23 @@ fn triad_guess(axes: &[Vector3<f64>; 3], rot_j: &Matrix3<f64>) -> [f64; 3] {
 /// panics; at a singular `S` it stops.
 pub fn hinges3_angles(axes: &[Vector3<f64>; 3], qj: &Quat) -> [f64; 3] {
     let guess = triad_guess(axes, &quat::rotation(qj));
-    let mut best: Option<([f64; 3], f64)> = None;
     let flipped = [
         guess[0] + std::f64::consts::PI,
         std::f64::consts::PI - guess[1],
         guess[2] + std::f64::consts::PI,
     ];
+    exact_triad(axes, qj, guess, flipped)
+        .unwrap_or_else(|| newton_branches(axes, qj, guess, flipped))
+}
+
+/// [`hinges3_angles`] by Newton's method from `guess`, zero and `flipped`.
+fn newton_branches(
+    axes: &[Vector3<f64>; 3],
+    qj: &Quat,
+    guess: [f64; 3],
+    flipped: [f64; 3],
+) -> [f64; 3] {
+    let mut best: Option<([f64; 3], f64)> = None;
     for start in [guess, [0.0; 3], flipped] {
         if start.iter().any(|t| !t.is_finite()) {
             continue;
@@ -90,6 +101,41 @@ pub fn hinges3_angles(axes: &[Vector3<f64>; 3], qj: &Quat) -> [f64; 3] {
         }
     }
     best.map_or([0.0; 3], |(t, _)| t)
+}
+
+/// The branch of an orthonormal triad nearest zero, when the closed form is exact at `qj`.
+///
+/// Why: an orthonormal triad has exactly the two branches `guess` and `flipped`, where Newton's
+/// method from any start ends, so [`hinges3_angles`] would pick the same one after three
+/// Newton runs; the humanoid's hips and abdomen spent ~10% of a step there. Near gimbal lock
+/// (`θ2 → ±π/2`, where `asin` loses accuracy and the branches merge) the check fails and the
+/// Newton path decides.
+fn exact_triad(
+    axes: &[Vector3<f64>; 3],
+    qj: &Quat,
+    guess: [f64; 3],
+    flipped: [f64; 3],
+) -> Option<[f64; 3]> {
+    const ORTHONORMAL: f64 = 1e-12;
+    let [a1, a2, a3] = axes;
+    let unit = |a: &Vector3<f64>| (a.norm_squared() - 1.0).abs() < ORTHONORMAL;
+    let orthogonal = a1.dot(a2).abs() < ORTHONORMAL
+        && a2.dot(a3).abs() < ORTHONORMAL
+        && a1.dot(a3).abs() < ORTHONORMAL;
+    if !(unit(a1) && unit(a2) && unit(a3) && orthogonal) || guess.iter().any(|t| !t.is_finite()) {
+        return None;
+    }
+    let err = quat::rotation_vector(&(quat::conj(&hinges3_rotation(axes, &guess)) * qj)).norm();
+    if err >= 1e-13 || (guess[1].abs() - std::f64::consts::FRAC_PI_2).abs() < 1e-6 {
+        return None;
+    }
+    let (g, f) = (
+        guess.map(super::geometry::wrap_angle),
+        flipped.map(super::geometry::wrap_angle),
+    );
+    let size = |t: &[f64; 3]| t.iter().map(|t| t * t).sum::<f64>();
+    // the tie rule of `hinges3_angles`: a later solution must be smaller by 1e-12
+    Some(if size(&f) < size(&g) - 1e-12 { f } else { g })
 }
 
 /// Newton iterations from `theta`; returns the angles and the final rotation error (rad).
@@ -228,5 +274,54 @@ mod tests {
                 "{b1} {b2}"
             );
         }
+    }
+
+    #[test]
+    fn closed_form_triads_pick_the_branch_newton_picks() {
+        // orthonormal triads in several orders and handednesses, rotations over the whole
+        // range (both branches, near and far from gimbal lock)
+        let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
+        let tilt = quat::rotation(&quat::axis_angle(
+            &Vector3::new(1.0, 2.0, 2.0).normalize(),
+            0.7,
+        ));
+        let triads = [
+            [x, y, z],
+            [z, x, y],
+            [y, z, x],
+            [x, z, y],
+            [tilt * x, tilt * z, tilt * y],
+        ];
+        let mut fast = 0;
+        for ax in triads {
+            for k in 0..400 {
+                let t = k as f64;
+                let theta = [
+                    3.1 * (0.37 * t).sin(),
+                    1.6 * (0.71 * t).cos(),
+                    3.1 * (1.13 * t).sin(),
+                ];
+                let q = hinges3_rotation(&ax, &theta);
+                let guess = triad_guess(&ax, &quat::rotation(&q));
+                let flipped = [
+                    guess[0] + std::f64::consts::PI,
+                    std::f64::consts::PI - guess[1],
+                    guess[2] + std::f64::consts::PI,
+                ];
+                let reference = newton_branches(&ax, &q, guess, flipped);
+                if exact_triad(&ax, &q, guess, flipped).is_some() {
+                    fast += 1;
+                }
+                let got = hinges3_angles(&ax, &q);
+                for i in 0..3 {
+                    assert!(
+                        (got[i] - reference[i]).abs() < 1e-12,
+                        "{ax:?} {theta:?}: {got:?} vs {reference:?}"
+                    );
+                }
+            }
+        }
+        // the closed form is taken away from gimbal lock, i.e. almost always
+        assert!(fast > 1900, "closed form taken {fast} of 2000 times");
     }
 }
