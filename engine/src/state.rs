@@ -370,6 +370,11 @@ pub struct Workspace {
     pub(crate) free_adr: Vec<usize>,
     /// Spring and applied generalized forces per joint free dof (current configuration).
     pub(crate) joint_tau: Vec<[f64; 6]>,
+    /// Joints whose current- and next-configuration terms are recomputed (empty: all). Set only
+    /// by the gradients' partials, whose perturbations move a few bodies: the other joints'
+    /// `jac_now`, `free_jac` and `joint_tau` are kept from the unperturbed point, and their own
+    /// rows and limit rows are left stale (they lie outside the perturbation's support).
+    pub(crate) joint_filter: Vec<bool>,
     /// Scalar force of each actuator (current state and controls).
     pub(crate) act_force: Vec<f64>,
     /// `∂k/∂x` of each joint coupling at the current configuration.
@@ -492,6 +497,7 @@ impl Workspace {
             free_jac: vec![0.0; nfree],
             free_adr,
             joint_tau: vec![[0.0; 6]; model.njoint()],
+            joint_filter: Vec::new(),
             act_force: vec![0.0; model.nu()],
             coupling_slope: vec![0.0; model.couplings.len()],
             topology_id: model.topology_id(),

@@ -88,6 +88,9 @@ struct Probe<'a> {
     residual: Vec<f64>,
     scratch: Vec<f64>,
     dir: Vec<f64>,
+    /// `jac_now`, `free_jac` and `joint_tau` at the unperturbed inputs: a restricted residual
+    /// recomputes only the joints its perturbation touches (`Workspace::joint_filter`).
+    base_joints: (Vec<f64>, Vec<f64>, Vec<[f64; 6]>),
 }
 
 impl<'a> Probe<'a> {
@@ -95,7 +98,20 @@ impl<'a> Probe<'a> {
         let mut ws = Workspace::new(model);
         // the residual map is linearised with the solve's contact activation frozen
         ws.active.copy_from_slice(active);
+        newton::prepare_smooth_forces(
+            model,
+            &point.state,
+            &mut ws,
+            ctrl,
+            &AppliedForces::default(),
+        );
+        let base_joints = (
+            ws.jac_now.clone(),
+            ws.free_jac.clone(),
+            ws.joint_tau.clone(),
+        );
         Probe {
+            base_joints,
             base: model,
             point,
             ctrl0: ctrl,
@@ -148,6 +164,7 @@ impl<'a> Probe<'a> {
 
     /// Full residual at `w` with the probe's inputs.
     fn residual_full(&mut self, w: &[f64]) {
+        self.ws.joint_filter.clear();
         let forces = AppliedForces::default();
         newton::prepare_forces(&self.model, &self.state, &mut self.ws, &self.ctrl, &forces);
         newton::evaluate_in(
@@ -162,7 +179,21 @@ impl<'a> Probe<'a> {
 
     /// Residual at `w` with only the contact candidates `contacts` (of those `active`)
     /// evaluated; the others are left out of both rows and impulses (they do not change).
-    fn residual_restricted(&mut self, w: &[f64], contacts: &[usize], active: &[bool]) {
+    /// Likewise only the `joints` set are re-evaluated; the others keep their terms at the
+    /// unperturbed inputs, and their own rows are not written.
+    fn residual_restricted(
+        &mut self,
+        w: &[f64],
+        contacts: &[usize],
+        active: &[bool],
+        joints: &[bool],
+    ) {
+        let (jac, free, tau) = &self.base_joints;
+        self.ws.jac_now.copy_from_slice(jac);
+        self.ws.free_jac.copy_from_slice(free);
+        self.ws.joint_tau.copy_from_slice(tau);
+        self.ws.joint_filter.clear();
+        self.ws.joint_filter.extend_from_slice(joints);
         let (model, state) = (&self.model, &self.state);
         let forces = AppliedForces::default();
         newton::prepare_smooth_forces(model, state, &mut self.ws, &self.ctrl, &forces);
@@ -302,15 +333,27 @@ pub(super) fn partials(
                 out.rows[c] = node_rows(model, &s.nodes);
             }
             let groups = colour(&sup, model.topology.pattern.nnodes());
-            // contacts each group must refresh
-            let contacts: Vec<Vec<usize>> = groups
+            // contacts and joints each group must refresh
+            let refresh: Vec<Refresh> = groups
                 .iter()
                 .map(|g| {
                     let mut cs: Vec<usize> =
                         g.iter().flat_map(|&c| sup[c].contacts.clone()).collect();
                     cs.sort_unstable();
                     cs.dedup();
-                    cs
+                    let mut touched = vec![false; model.nbody()];
+                    for b in g.iter().flat_map(|&c| &sup[c].bodies) {
+                        touched[*b] = true;
+                    }
+                    let joints = model
+                        .joints
+                        .iter()
+                        .map(|j| touched[j.parent] || touched[j.child])
+                        .collect();
+                    Refresh {
+                        contacts: cs,
+                        joints,
+                    }
                 })
                 .collect();
             residual_columns(
@@ -320,19 +363,27 @@ pub(super) fn partials(
                 &eps,
                 w,
                 &groups,
-                Some(&contacts),
+                Some(&refresh),
             );
-            output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, method);
+            output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, Some(&sup));
             return Ok(out);
         }
     };
     residual_columns(&mut probe, &mut out, inputs, &eps, w, &groups, None);
-    output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, method);
+    output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, None);
     Ok(out)
 }
 
+/// What one group's residual evaluations recompute: its contact candidates and its joints
+/// (those of the bodies it touches).
+struct Refresh {
+    contacts: Vec<usize>,
+    joints: Vec<bool>,
+}
+
 /// `∂R/∂z` by central differences, one residual evaluation per group and sign; with
-/// `contacts`, each group evaluates only its contact candidates and scatters by the supports.
+/// `refresh`, each group evaluates only its contact candidates and joints and scatters by the
+/// supports.
 fn residual_columns(
     probe: &mut Probe,
     out: &mut Partials,
@@ -340,15 +391,15 @@ fn residual_columns(
     eps: &[f64],
     w: &[f64],
     groups: &[Vec<usize>],
-    contacts: Option<&[Vec<usize>]>,
+    refresh: Option<&[Refresh]>,
 ) {
     let active = probe.ws.active.clone();
     let mut plus = vec![0.0; w.len()];
     for (k, group) in groups.iter().enumerate() {
         for sign in [1.0, -1.0] {
             probe.perturb(inputs, eps, group, sign);
-            match contacts {
-                Some(cs) => probe.residual_restricted(w, &cs[k], &active),
+            match refresh {
+                Some(r) => probe.residual_restricted(w, &r[k].contacts, &active, &r[k].joints),
                 None => probe.residual_full(w),
             }
             out.evaluations += 1;
@@ -370,8 +421,9 @@ fn residual_columns(
     probe.ws.active.copy_from_slice(&active);
 }
 
-/// `∂Y/∂z` per column (the output map alone: only state columns and the time step enter it)
-/// and `∂Y/∂w` per body velocity component.
+/// `∂Y/∂z` (the output map alone: only state columns and the time step enter it) and `∂Y/∂w`
+/// per body velocity component. With the residual supports `sup` (coloured partials), columns
+/// and bodies whose output rows do not overlap are perturbed together; without, one by one.
 fn output_partials(
     probe: &mut Probe,
     out: &mut Partials,
@@ -379,35 +431,67 @@ fn output_partials(
     eps: &[f64],
     w: &[f64],
     out_base: &Point,
-    method: PartialsMethod,
+    sup: Option<&[Support]>,
 ) {
+    let model = probe.base;
     let ny = out.y_z.nrows();
     let (mut yp, mut ym) = (vec![0.0; ny], vec![0.0; ny]);
-    for (c, input) in inputs.iter().enumerate() {
-        if !matches!(input, Input::State(_) | Input::Param(Param::Timestep)) {
-            continue;
+    let cols: Vec<usize> = (0..inputs.len())
+        .filter(|&c| matches!(inputs[c], Input::State(_) | Input::Param(Param::Timestep)))
+        .collect();
+    // output rows of each column: those of the bodies it touches (a body's next state is its
+    // own state stepped by its velocity in `w`)
+    let body_rows = output_rows(model, out_base.coords);
+    let col_rows: Vec<Support> = (0..inputs.len())
+        .map(|c| {
+            let mut nodes: Vec<usize> = match (sup, inputs[c]) {
+                (Some(sup), Input::State(_)) => sup[c]
+                    .bodies
+                    .iter()
+                    .flat_map(|&b| body_rows[b - 1].nodes.iter().copied())
+                    .collect(),
+                _ => (0..ny).collect(),
+            };
+            nodes.sort_unstable();
+            nodes.dedup();
+            Support {
+                nodes,
+                ..Support::default()
+            }
+        })
+        .collect();
+    let groups: Vec<Vec<usize>> = match sup {
+        Some(_) => {
+            let supports: Vec<Support> = cols.iter().map(|&c| col_rows[c].clone()).collect();
+            colour(&supports, ny)
+                .into_iter()
+                .map(|g| g.into_iter().map(|k| cols[k]).collect())
+                .collect()
         }
+        None => cols.iter().map(|&c| vec![c]).collect(),
+    };
+    for group in &groups {
         for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
-            probe.perturb(inputs, eps, &[c], sign);
+            probe.perturb(inputs, eps, group, sign);
             probe.output(w, out_base, y);
-            probe.restore(inputs, &[c]);
+            probe.restore(inputs, group);
         }
-        for i in 0..ny {
-            out.y_z[(i, c)] = (yp[i] - ym[i]) / (2.0 * eps[c]);
+        for &c in group {
+            for &i in &col_rows[c].nodes {
+                out.y_z[(i, c)] = (yp[i] - ym[i]) / (2.0 * eps[c]);
+            }
         }
     }
     // ∂Y/∂w: bodies whose outputs do not overlap are perturbed together
-    let model = probe.base;
-    let (rows, groups) = match method {
-        PartialsMethod::Coloured => {
-            let rows = output_rows(model, out_base.coords);
-            let groups = colour(&rows, ny);
-            (rows, groups)
+    let (rows, groups) = match sup {
+        Some(_) => {
+            let groups = colour(&body_rows, ny);
+            (body_rows, groups)
         }
-        PartialsMethod::ColumnByColumn => {
+        None => {
             let all = Support {
                 nodes: (0..ny).collect(),
-                contacts: vec![],
+                ..Support::default()
             };
             let n = model.nbody() - 1;
             (vec![all; n], (0..n).map(|b| vec![b]).collect())
@@ -457,7 +541,7 @@ fn output_rows(model: &Model, coords: Coordinates) -> Vec<Support> {
             };
             Support {
                 nodes,
-                contacts: vec![],
+                ..Support::default()
             }
         })
         .collect()

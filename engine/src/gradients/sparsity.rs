@@ -98,6 +98,8 @@ pub(super) struct Support {
     pub nodes: Vec<usize>,
     /// Contact candidates whose geometry changes (re-evaluated), sorted.
     pub contacts: Vec<usize>,
+    /// Bodies whose state or elements change (their joints are re-evaluated).
+    pub bodies: Vec<usize>,
 }
 
 impl Support {
@@ -153,6 +155,7 @@ impl Support {
         Support {
             nodes,
             contacts: cs,
+            bodies: touched.iter().copied().filter(|&b| b > 0).collect(),
         }
     }
 
@@ -161,6 +164,7 @@ impl Support {
         Support {
             nodes: (0..model.topology.pattern.nnodes()).collect(),
             contacts: (0..model.ncontact()).collect(),
+            bodies: (1..model.nbody()).collect(),
         }
     }
 }
@@ -200,12 +204,12 @@ mod tests {
         let mut sup: Vec<Support> = (0..9)
             .map(|i| Support {
                 nodes: vec![i, i + 1],
-                contacts: vec![],
+                ..Support::default()
             })
             .collect();
         sup.push(Support {
             nodes: (0..10).collect(),
-            contacts: vec![],
+            ..Support::default()
         });
         let groups = colour(&sup, 10);
         let mut seen = vec![false; sup.len()];

@@ -388,6 +388,9 @@ pub(crate) fn evaluate(
     }
     for (j, joint) in model.joints.iter().enumerate() {
         let Some(n) = t.limit_node[j] else { continue };
+        if !super::newton::joint_included(ws, j) {
+            continue;
+        }
         let frame = JointFrame::new(joint, &next(ws, joint.parent), &next(ws, joint.child));
         let mut q = [0.0; 7];
         frame.coordinates(joint, &mut q[..joint.nq()]);

@@ -107,6 +107,9 @@ pub(crate) fn prepare_smooth_forces(
     }
     // Jacobians and spring forces first: actuator lengths and rates need every free Jacobian
     for (ji, joint) in model.joints.iter().enumerate() {
+        if !joint_included(ws, ji) {
+            continue;
+        }
         let frame = JointFrame::new(joint, &pose(state, joint.parent), &pose(state, joint.child));
         let adr = model.topology.con_adr[ji];
         frame.constraint_jacobian(joint, &mut ws.jac_now[12 * adr..12 * (adr + joint.ncon())]);
@@ -399,6 +402,11 @@ pub(crate) fn evaluate_in(
     }
 }
 
+/// Whether joint `ji` passes the workspace's joint filter (see `Workspace::joint_filter`).
+pub(crate) fn joint_included(ws: &Workspace, ji: usize) -> bool {
+    ws.joint_filter.is_empty() || ws.joint_filter[ji]
+}
+
 /// Body and joint rows (everything but the inequality nodes).
 fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], residual: &mut [f64]) {
     let h = model.options.timestep;
@@ -409,6 +417,7 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
         jac_now,
         free_jac,
         free_adr,
+        joint_filter,
         ..
     } = ws;
     for (b, body) in model.bodies.iter().enumerate().skip(1) {
@@ -459,7 +468,9 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
             } else {
                 next_pose[joint.child]
             };
-            JointFrame::new(joint, &np, &nc).constraint(joint, &mut residual[o..o + ncon]);
+            if joint_filter.is_empty() || joint_filter[ji] {
+                JointFrame::new(joint, &np, &nc).constraint(joint, &mut residual[o..o + ncon]);
+            }
         }
         if joint.has_damper() {
             add_damper_residual(model, joint, &free_jac[free_adr[ji]..], w, residual, h);
