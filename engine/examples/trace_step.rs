@@ -1,0 +1,60 @@
+//! The interior-point iterations of one step of the Table V workload (dt = 0.01, controls from
+//! `workload::Controls`), for diagnosing a hard step:
+//! `cargo run --release -p ukemi-engine --example trace_step -- MODEL.xml STEP [SEED]`
+//! Prints the steps before STEP that took over 100 iterations, then one line per iteration of
+//! STEP (attempt, residual, complementarity, μ, affine and accepted step lengths, whether the
+//! corrected direction was taken). Attempts restart per sub-step of a subdivided step.
+#![allow(clippy::print_stdout)]
+use ukemi_engine::{Workspace, mjcf, step};
+
+#[path = "common/workload.rs"]
+mod workload;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let model = mjcf::load_path(std::path::Path::new(&args[1]))
+        .unwrap()
+        .model;
+    let which: usize = args.get(2).map_or(0, |s| s.parse().unwrap());
+    let mut opts = model.options.clone();
+    opts.timestep = 0.01;
+    let model = model.with_options(opts).unwrap();
+    let mut state = workload::start_state(&model);
+    let mut ws = Workspace::new(&model);
+    let mut controls = match args.get(3) {
+        Some(s) => workload::Controls::with_seed(s.parse().unwrap()),
+        None => workload::Controls::new(),
+    };
+    for k in 0..=which {
+        let ctrl = controls.next(&model);
+        ws.set_trace(k == which, false);
+        let r = step(&model, &mut state, &mut ws, &ctrl).unwrap();
+        if k < which && r.iterations > 100 {
+            println!(
+                "step {k}: {} iterations, {} sub-steps",
+                r.iterations, r.subdivisions
+            );
+        }
+        if k == which {
+            println!(
+                "step {k}: {} iterations, {:?}, {} sub-steps, {} active candidates",
+                r.iterations,
+                r.status,
+                r.subdivisions,
+                ws.active_contacts()
+            );
+            for (i, t) in ws.trace().iter().enumerate() {
+                println!(
+                    "{i:4} attempt {} residual {:.2e} compl {:.2e} mu {:.2e} alpha_aff {:.2e} alpha {:.2e} corrector {}",
+                    t.attempt,
+                    t.residual,
+                    t.complementarity,
+                    t.mu,
+                    t.alpha_aff,
+                    t.alpha,
+                    t.corrector
+                );
+            }
+        }
+    }
+}
