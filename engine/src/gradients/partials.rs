@@ -253,24 +253,25 @@ fn supports(model: &Model, probe: &mut Probe, inputs: &[Input], eps: &[f64]) -> 
                 probe.perturb(inputs, eps, &[c], 1.0);
                 let (touched, moved) = changed_bodies(model, &probe.point.state, &probe.state);
                 probe.restore(inputs, &[c]);
-                Support::new(model, &graph, &touched, &moved, &[])
+                Support::new(model, &graph, &touched, &moved, &[], &moved)
             }
             Input::Ctrl(i) => {
                 let bodies = transmission_bodies(model, &model.actuators[i].transmission);
-                Support::new(model, &graph, &bodies, &[], &[])
+                Support::new(model, &graph, &bodies, &[], &[], &[])
             }
             Input::Param(p) => match p {
                 Param::Mass(b) | Param::Inertia(b, _, _) => {
-                    Support::new(model, &graph, &[b], &[], &[])
+                    Support::new(model, &graph, &[b], &[], &[], &[])
                 }
                 Param::Friction(g) | Param::Size(g, _) | Param::GeomPos(g, _) => {
-                    Support::new(model, &graph, &[], &[], &graph.geom_contacts[g])
+                    Support::new(model, &graph, &[], &[], &graph.geom_contacts[g], &[])
                 }
                 Param::Stiffness(j, _) | Param::Damping(j, _) => {
                     let joint = &model.joints[j];
-                    Support::new(model, &graph, &[joint.parent, joint.child], &[], &[])
+                    let bodies = [joint.parent, joint.child];
+                    Support::new(model, &graph, &bodies, &[], &[], &bodies)
                 }
-                Param::Gravity(_) => Support::new(model, &graph, &all, &[], &[]),
+                Param::Gravity(_) => Support::new(model, &graph, &all, &[], &[], &[]),
                 Param::Timestep => Support::everything(model),
             },
         })
@@ -439,8 +440,8 @@ fn output_partials(
     let cols: Vec<usize> = (0..inputs.len())
         .filter(|&c| matches!(inputs[c], Input::State(_) | Input::Param(Param::Timestep)))
         .collect();
-    // output rows of each column: those of the bodies it touches (a body's next state is its
-    // own state stepped by its velocity in `w`)
+    // output rows of each column: those of the bodies it moves (a body's next state is its
+    // own pose stepped by its velocity in `w`; the current velocities do not enter)
     let body_rows = output_rows(model, out_base.coords);
     let col_rows: Vec<Support> = (0..inputs.len())
         .map(|c| {
@@ -471,6 +472,9 @@ fn output_partials(
         None => cols.iter().map(|&c| vec![c]).collect(),
     };
     for group in &groups {
+        if group.iter().all(|&c| col_rows[c].nodes.is_empty()) {
+            continue; // velocity columns: ∂Y/∂z is zero
+        }
         for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
             probe.perturb(inputs, eps, group, sign);
             probe.output(w, out_base, y);

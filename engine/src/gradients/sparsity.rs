@@ -98,7 +98,9 @@ pub(super) struct Support {
     pub nodes: Vec<usize>,
     /// Contact candidates whose geometry changes (re-evaluated), sorted.
     pub contacts: Vec<usize>,
-    /// Bodies whose state or elements change (their joints are re-evaluated).
+    /// Bodies whose pose, or whose joints' parameters, change: their joints are re-evaluated,
+    /// and their next states are the outputs that move. (A current velocity enters neither:
+    /// joint frames, springs and limits read poses, and the next state's velocities are `w`.)
     pub bodies: Vec<usize>,
 }
 
@@ -106,12 +108,14 @@ impl Support {
     /// The support of an input that changes the state or the elements of the moving bodies
     /// `touched`, moves the bodies `moved` (a subset) and changes the contact candidates
     /// `contacts` beyond those of the moved bodies.
+    /// `joint_bodies` are the bodies of [`Support::bodies`].
     pub fn new(
         model: &Model,
         graph: &Interactions,
         touched: &[usize],
         moved: &[usize],
         contacts: &[usize],
+        joint_bodies: &[usize],
     ) -> Support {
         let t = &model.topology;
         let mut cs: Vec<usize> = contacts.to_vec();
@@ -155,7 +159,7 @@ impl Support {
         Support {
             nodes,
             contacts: cs,
-            bodies: touched.iter().copied().filter(|&b| b > 0).collect(),
+            bodies: joint_bodies.iter().copied().filter(|&b| b > 0).collect(),
         }
     }
 
