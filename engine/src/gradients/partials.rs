@@ -208,9 +208,15 @@ impl<'a> Probe<'a> {
     }
 
     /// Output tangent (relative to `out_base`) of the next state from `w` with the probe's inputs.
-    fn output(&mut self, w: &[f64], out_base: &Point, y: &mut [f64]) {
+    /// With `joints`, only the rows of those joints (minimal coordinates) are written.
+    fn output(&mut self, w: &[f64], out_base: &Point, joints: Option<&[bool]>, y: &mut [f64]) {
         next_state_into(&self.model, &self.state, w, &mut self.next);
-        out_base.difference(&self.model, &self.next, y, &mut self.scratch);
+        match joints {
+            Some(js) => {
+                out_base.difference_joints(&self.model, &self.next, js, y, &mut self.scratch)
+            }
+            None => out_base.difference(&self.model, &self.next, y, &mut self.scratch),
+        }
     }
 }
 
@@ -471,13 +477,36 @@ fn output_partials(
         }
         None => cols.iter().map(|&c| vec![c]).collect(),
     };
+    // the joints whose output rows a set of rows (minimal coordinates) covers
+    let dof_joint: Vec<usize> = {
+        let mut d = vec![0; model.nv];
+        for (ji, j) in model.joints.iter().enumerate().filter(|(_, j)| !j.is_loop) {
+            d[j.qvel_adr..j.qvel_adr + j.nfree()].fill(ji);
+        }
+        d
+    };
+    let joints_of = |rows: &mut dyn Iterator<Item = usize>| -> Vec<bool> {
+        let mut js = vec![false; model.njoint()];
+        for i in rows {
+            js[dof_joint[i % model.nv.max(1)]] = true;
+        }
+        js
+    };
+    let restrict = sup.is_some() && out_base.coords == Coordinates::Minimal;
     for group in &groups {
         if group.iter().all(|&c| col_rows[c].nodes.is_empty()) {
             continue; // velocity columns: ∂Y/∂z is zero
         }
+        let js = restrict.then(|| {
+            joints_of(
+                &mut group
+                    .iter()
+                    .flat_map(|&c| col_rows[c].nodes.iter().copied()),
+            )
+        });
         for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
             probe.perturb(inputs, eps, group, sign);
-            probe.output(w, out_base, y);
+            probe.output(w, out_base, js.as_deref(), y);
             probe.restore(inputs, group);
         }
         for &c in group {
@@ -504,12 +533,14 @@ fn output_partials(
     let slot = |b: usize| body_node(b + 1).map_or(0, |n| model.topology.pattern.offset(n));
     let mut wp = w.to_vec();
     for group in &groups {
+        let js = restrict
+            .then(|| joints_of(&mut group.iter().flat_map(|&b| rows[b].nodes.iter().copied())));
         for comp in 0..6 {
             for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
                 for &b in group {
                     wp[slot(b) + comp] = w[slot(b) + comp] + sign * FD_STEP;
                 }
-                probe.output(&wp, out_base, y);
+                probe.output(&wp, out_base, js.as_deref(), y);
             }
             for &b in group {
                 let k = slot(b) + comp;

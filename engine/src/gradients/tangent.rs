@@ -9,7 +9,10 @@
 //!   velocity changes.
 use nalgebra::Vector3;
 
-use crate::joints::coordinates::{qpos_into, qvel_into, set_minimal};
+use crate::joints::coordinates::{
+    joint_qvel_into, qpos_into, qvel_into, set_minimal, set_minimal_changed,
+};
+use crate::joints::geometry::JointFrame;
 use crate::math::quat;
 use crate::model::Model;
 use crate::state::State;
@@ -82,22 +85,41 @@ pub fn integrate_qpos(model: &Model, qpos: &mut [f64], dq: &[f64]) {
 pub fn difference_qpos(model: &Model, qpos0: &[f64], qpos1: &[f64], dq: &mut [f64]) {
     for j in model.joints.iter().filter(|j| !j.is_loop) {
         let (qa, va) = (j.qpos_adr, j.qvel_adr);
-        if j.rot.nq() == 4 {
-            for i in 0..j.ntrans {
-                dq[va + i] = qpos1[qa + i] - qpos0[qa + i];
-            }
-            let a = qa + j.ntrans;
-            let (q0, q1) = (
-                quat::from_wxyz(&qpos0[a..a + 4]).normalize(),
-                quat::from_wxyz(&qpos1[a..a + 4]).normalize(),
-            );
-            let r = quat::rotation_vector(&(quat::conj(&q0) * q1));
-            dq[va + j.ntrans..va + j.ntrans + 3].copy_from_slice(r.as_slice());
-        } else {
-            for i in 0..j.nfree() {
-                dq[va + i] = qpos1[qa + i] - qpos0[qa + i];
-            }
+        let (nq, nf) = (j.nq(), j.nfree());
+        joint_difference(
+            j,
+            &qpos0[qa..qa + nq],
+            &qpos1[qa..qa + nq],
+            &mut dq[va..va + nf],
+        );
+    }
+}
+
+/// One joint's `q1 ⊖ q0` (its `nq` coordinates to its `nfree` tangent entries).
+fn joint_difference(j: &crate::joints::Joint, q0: &[f64], q1: &[f64], dq: &mut [f64]) {
+    if j.rot.nq() == 4 {
+        for i in 0..j.ntrans {
+            dq[i] = q1[i] - q0[i];
         }
+        let a = j.ntrans;
+        let (r0, r1) = (
+            quat::from_wxyz(&q0[a..a + 4]).normalize(),
+            quat::from_wxyz(&q1[a..a + 4]).normalize(),
+        );
+        let r = quat::rotation_vector(&(quat::conj(&r0) * r1));
+        dq[j.ntrans..j.ntrans + 3].copy_from_slice(r.as_slice());
+    } else {
+        for i in 0..j.nfree() {
+            dq[i] = q1[i] - q0[i];
+        }
+    }
+}
+
+fn pose_or_world(state: &State, b: usize) -> crate::joints::geometry::Pose {
+    if b == 0 {
+        crate::joints::geometry::Pose::world()
+    } else {
+        state.pose(b)
     }
 }
 
@@ -153,8 +175,19 @@ impl Point {
                     qvel[i] = self.qvel[i] + eps * dir[nv + i];
                 }
                 integrate_qpos(model, qpos, &dq[..nv]);
+                // only the joints whose coordinates move, and those below them, are recomputed
+                // (`out` holds this point's forward kinematics)
+                let changed: Vec<bool> = model
+                    .joints
+                    .iter()
+                    .map(|j| {
+                        eps != 0.0
+                            && (j.qvel_adr..j.qvel_adr + j.nfree())
+                                .any(|i| dir[i] != 0.0 || dir[nv + i] != 0.0)
+                    })
+                    .collect();
                 // inputs were validated when the point was made; perturbations stay finite
-                let _ = set_minimal(model, out, qpos, qvel);
+                let _ = set_minimal_changed(model, out, qpos, qvel, &changed);
             }
             Coordinates::Maximal => {
                 for b in 1..model.nbody() {
@@ -201,6 +234,39 @@ impl Point {
                         o[3 * k..3 * k + 3].copy_from_slice(x.as_slice());
                     }
                 }
+            }
+        }
+    }
+
+    /// [`Point::difference`] on the rows of the joints flagged in `joints` only (minimal
+    /// coordinates; in maximal ones every row is written). The other rows of `out` are left as
+    /// they are.
+    pub fn difference_joints(
+        &self,
+        model: &Model,
+        state: &State,
+        joints: &[bool],
+        out: &mut [f64],
+        scratch: &mut [f64],
+    ) {
+        if self.coords == Coordinates::Maximal {
+            return self.difference(model, state, out, scratch);
+        }
+        let nv = model.nv;
+        let (dq, dv) = out.split_at_mut(nv);
+        for (ji, j) in model.joints.iter().enumerate() {
+            if j.is_loop || !joints[ji] {
+                continue;
+            }
+            let (qa, va, nq, nf) = (j.qpos_adr, j.qvel_adr, j.nq(), j.nfree());
+            let parent = pose_or_world(state, j.parent);
+            let child = pose_or_world(state, j.child);
+            let q1 = &mut scratch[qa..qa + nq];
+            JointFrame::new(j, &parent, &child).coordinates(j, q1);
+            joint_difference(j, &self.qpos[qa..qa + nq], q1, &mut dq[va..va + nf]);
+            joint_qvel_into(state, j, &mut dv[va..va + nf]);
+            for (d, v0) in dv[va..va + nf].iter_mut().zip(&self.qvel[va..va + nf]) {
+                *d -= v0;
             }
         }
     }

@@ -107,8 +107,43 @@ pub fn validate_minimal(model: &Model, qpos: &[f64], qvel: &[f64]) -> Result<()>
 /// consistent with them (the solver then keeps them closed).
 pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64]) -> Result<()> {
     validate_minimal(model, qpos, qvel)?;
+    forward_kinematics(model, state, qpos, qvel, None);
+    Ok(())
+}
+
+/// [`set_minimal`] for a `state` that already holds the forward kinematics of coordinates that
+/// differ from `(qpos, qvel)` only at the joints flagged in `changed`: only those joints and the
+/// joints below them are recomputed (bitwise what [`set_minimal`] computes for them; the rest
+/// is left as it is). The gradients' partials perturb a few coordinates at a time.
+pub(crate) fn set_minimal_changed(
+    model: &Model,
+    state: &mut State,
+    qpos: &[f64],
+    qvel: &[f64],
+    changed: &[bool],
+) -> Result<()> {
+    validate_minimal(model, qpos, qvel)?;
+    forward_kinematics(model, state, qpos, qvel, Some(changed));
+    Ok(())
+}
+
+fn forward_kinematics(
+    model: &Model,
+    state: &mut State,
+    qpos: &[f64],
+    qvel: &[f64],
+    changed: Option<&[bool]>,
+) {
+    // bodies recomputed so far (their child joints must follow)
+    let mut moved = changed.map(|_| vec![false; model.nbody()]);
     for &ji in &model.topology.fk_order {
         let j = &model.joints[ji];
+        if let (Some(changed), Some(moved)) = (changed, moved.as_mut()) {
+            if !changed[ji] && !moved[j.parent] {
+                continue;
+            }
+            moved[j.child] = true;
+        }
         let parent = pose_of(state, j.parent);
         // measured displacement = qpos - qpos_ref (MuJoCo's `ref`)
         let mut q = [0.0; 7];
@@ -122,12 +157,16 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
         let rot_pj = rot_p * quat::rotation(&j.offset);
         let child_quat = (parent.quat * j.offset * qj).normalize();
         let rot_c = quat::rotation(&child_quat);
-        let free = j.trans_basis.columns(0, j.ntrans);
-        let delta = free * nalgebra::DVector::from_column_slice(&q[..j.ntrans]);
+        // Σ_i basis_i q_i over the free translations (no allocation)
+        let along = |x: &[f64]| -> Vector3<f64> {
+            (0..j.ntrans)
+                .map(|i| j.trans_basis.column(i) * x[i])
+                .fold(Vector3::zeros(), |a, b| a + b)
+        };
         // hinges about offset anchors displace the child anchor by g(θ) (joints::offsets)
         let (g, dg_dtheta) =
             offsets::displacement_at_angles(&j.rot, &j.hinge_offsets, &q[j.ntrans..]);
-        let delta = Vector3::new(delta[0], delta[1], delta[2]) + g;
+        let delta = along(q) + g;
         let a_p = parent.pos + rot_p * j.parent_anchor;
         let a_c = a_p + rot_pj * delta;
         let child = Pose {
@@ -144,8 +183,7 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
         let rot_j = quat::rotation(&qj);
         let w_c = rot_j.transpose() * quat::rotation(&j.offset).transpose() * w_p
             + joint_angvel(&j.rot, &qj, &qd[j.ntrans..]);
-        let ddelta = free * nalgebra::DVector::from_column_slice(&qd[..j.ntrans]);
-        let ddelta = Vector3::new(ddelta[0], ddelta[1], ddelta[2])
+        let ddelta = along(qd)
             + (0..j.rot.nfree().min(3))
                 .map(|i| dg_dtheta[i] * qd[j.ntrans + i])
                 .sum::<Vector3<f64>>();
@@ -155,5 +193,4 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
         let v_c = adot_c - (rot_c * w_c).cross(&(rot_c * j.child_anchor));
         state.set_velocity(j.child, &v_c, &w_c);
     }
-    Ok(())
 }
