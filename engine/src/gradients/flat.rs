@@ -15,7 +15,7 @@ use super::tangent::{
 use super::{Linearization, Wrt};
 use crate::joints::coordinates::{qpos_into, qvel_into, set_minimal};
 use crate::model::Model;
-use crate::state::{State, Workspace};
+use crate::state::{Recycled, State, Workspace};
 use crate::{Error, Result, ensure};
 
 /// Length of a flat state.
@@ -44,7 +44,7 @@ pub fn flat_of(model: &Model, state: &State, out: &mut [f64]) {
 /// One step of a flat state. Errors (including non-convergence) name the failure.
 pub fn step(model: &Model, x: &[f64], u: &[f64]) -> Result<Vec<f64>> {
     let s = state_of(model, x)?;
-    let mut ws = Workspace::new(model);
+    let mut ws = Recycled::new(Workspace::pooled(model));
     let next = advance(model, &s, u, Coordinates::Minimal, &mut ws)?;
     let mut out = vec![0.0; nx(model)];
     flat_of(model, &next, &mut out);
@@ -56,7 +56,7 @@ pub fn step(model: &Model, x: &[f64], u: &[f64]) -> Result<Vec<f64>> {
 /// iterate, flagged, so array programs (under `jit`) can mask it instead of aborting.
 pub fn step_with_status(model: &Model, x: &[f64], u: &[f64]) -> Result<(Vec<f64>, u8)> {
     let mut s = state_of(model, x)?;
-    let mut ws = Workspace::new(model);
+    let mut ws = Recycled::new(Workspace::pooled(model));
     // subdivides a failed step, as `ukemi.step` does
     let report = crate::step::step(model, &mut s, &mut ws, u)?;
     let mut out = vec![0.0; nx(model)];
@@ -160,7 +160,7 @@ pub fn rollout(model: &Model, x0: &[f64], us: &[f64], nstep: usize) -> Result<Ve
     let n = nx(model);
     let mut out = vec![0.0; (nstep + 1) * n];
     let mut s = state_of(model, x0)?;
-    let mut ws = Workspace::new(model);
+    let mut ws = Recycled::new(Workspace::pooled(model));
     flat_of(model, &s, &mut out[..n]);
     for k in 0..nstep {
         s = advance(

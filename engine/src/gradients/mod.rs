@@ -50,7 +50,7 @@ use crate::math::quat;
 use crate::model::Model;
 use crate::model::topology_body_node as body_node;
 use crate::solver::{central, newton};
-use crate::state::{SolveStatus, State, StepReport, Workspace};
+use crate::state::{Recycled, SolveStatus, State, StepReport, Workspace};
 use crate::step::{AppliedForces, validate_inputs};
 use crate::{Error, Result, ensure};
 pub use partials::PartialsMethod;
@@ -138,7 +138,8 @@ pub(crate) struct SolveLinearization {
     next: State,
     report: StepReport,
     central: Option<Central>,
-    ws: Workspace,
+    /// The solve's workspace (its factored matrix), back to the thread's spares when dropped.
+    ws: Recycled,
     /// Gradient point (the solution, or its central-path point at `kappa_grad`).
     w: Vec<f64>,
     /// `∂R/∂z`, `∂Y/∂z`, `∂Y/∂w` with `z = [state | ctrl | params]` as selected by `wrt`.
@@ -180,7 +181,7 @@ fn next_state_into(model: &Model, state: &State, w: &[f64], out: &mut State) {
 /// The hard solve of one step from `state` in a fresh workspace; the report says whether it
 /// converged.
 fn solve_hard(model: &Model, state: &State, ctrl: &[f64]) -> Result<(Workspace, StepReport)> {
-    let mut ws = Workspace::new(model);
+    let mut ws = Workspace::pooled(model);
     validate_inputs(model, state, &ws, ctrl, &AppliedForces::default())?;
     newton::prepare(model, state, &mut ws, ctrl, &AppliedForces::default());
     let report = newton::solve(model, state, &mut ws);
@@ -502,7 +503,7 @@ impl SolveLinearization {
             next,
             report,
             central,
-            ws,
+            ws: Recycled::new(ws),
             w,
             parts,
             nx,
@@ -518,7 +519,7 @@ impl SolveLinearization {
     }
     /// The workspace the linearisation was computed in, for reuse.
     pub(crate) fn into_workspace(self) -> Workspace {
-        self.ws
+        self.ws.into_inner()
     }
 
     /// The hard next state (what [`crate::step`] returns).

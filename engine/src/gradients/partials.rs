@@ -19,7 +19,7 @@ use crate::model::Model;
 use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
 use crate::solver::newton;
-use crate::state::{State, Workspace};
+use crate::state::{Recycled, State, Workspace};
 use crate::step::AppliedForces;
 
 /// How [`super::Linearization`] takes the partial derivatives.
@@ -84,7 +84,7 @@ struct Probe<'a> {
     state: State,
     next: State,
     ctrl: Vec<f64>,
-    ws: Workspace,
+    ws: Recycled,
     residual: Vec<f64>,
     scratch: Vec<f64>,
     dir: Vec<f64>,
@@ -95,7 +95,7 @@ struct Probe<'a> {
 
 impl<'a> Probe<'a> {
     fn new(model: &'a Model, point: &'a Point, ctrl: &'a [f64], active: &[bool]) -> Probe<'a> {
-        let mut ws = Workspace::new(model);
+        let mut ws = Recycled::new(Workspace::pooled(model));
         // the residual map is linearised with the solve's contact activation frozen
         ws.active.copy_from_slice(active);
         newton::prepare_smooth_forces(

@@ -275,7 +275,7 @@ pub(crate) struct Kept {
     violation: Violation,
     /// False once anything else was evaluated (the derived quantities in the workspace, e.g.
     /// `next_pose`, are then another iterate's).
-    valid: bool,
+    pub(crate) valid: bool,
 }
 
 impl Kept {
