@@ -116,7 +116,7 @@ pub(crate) fn rollout_vjp_with(
         Error::shape("ctrls", &[nstep, nu], &[ctrls.len() / nu.max(1), nu])
     );
     state.check_model(model)?;
-    let mut ws = Workspace::new(model);
+    let mut ws = Workspace::pooled(model);
     let mut states = Vec::with_capacity(nstep + 1);
     let mut solutions = Vec::with_capacity(nstep);
     states.push(Point::new(model, state, coords)?.state);
@@ -162,7 +162,7 @@ pub(crate) fn rollout_vjp_with(
     for k in (0..nstep).rev() {
         let u = &ctrls[k * nu..(k + 1) * nu];
         let stored = &solutions[k];
-        let ws = spare.take().unwrap_or_else(|| Workspace::new(model));
+        let ws = spare.take().unwrap_or_else(|| Workspace::pooled(model));
         let mut lin =
             Linearization::from_stored(model, &states[k], u, coords, wrt, kappa_grad, stored, ws)
                 .map_err(|e| e.at(format!(" (step {k})")))?;
