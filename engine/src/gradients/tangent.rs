@@ -10,7 +10,7 @@
 use nalgebra::Vector3;
 
 use crate::joints::coordinates::{
-    joint_qvel_into, qpos_into, qvel_into, set_minimal, set_minimal_changed,
+    joint_qvel_into, pose_of, qpos_into, qvel_into, set_minimal, set_minimal_changed,
 };
 use crate::joints::geometry::JointFrame;
 use crate::math::quat;
@@ -112,14 +112,6 @@ fn joint_difference(j: &crate::joints::Joint, q0: &[f64], q1: &[f64], dq: &mut [
         for i in 0..j.nfree() {
             dq[i] = q1[i] - q0[i];
         }
-    }
-}
-
-fn pose_or_world(state: &State, b: usize) -> crate::joints::geometry::Pose {
-    if b == 0 {
-        crate::joints::geometry::Pose::world()
-    } else {
-        state.pose(b)
     }
 }
 
@@ -259,8 +251,8 @@ impl Point {
                 continue;
             }
             let (qa, va, nq, nf) = (j.qpos_adr, j.qvel_adr, j.nq(), j.nfree());
-            let parent = pose_or_world(state, j.parent);
-            let child = pose_or_world(state, j.child);
+            let parent = pose_of(state, j.parent);
+            let child = pose_of(state, j.child);
             let q1 = &mut scratch[qa..qa + nq];
             JointFrame::new(j, &parent, &child).coordinates(j, q1);
             joint_difference(j, &self.qpos[qa..qa + nq], q1, &mut dq[va..va + nf]);

@@ -16,7 +16,7 @@ use crate::model::Model;
 use crate::state::State;
 use crate::{Error, Result, ensure};
 
-fn pose_of(state: &State, b: usize) -> Pose {
+pub(crate) fn pose_of(state: &State, b: usize) -> Pose {
     if b == 0 { Pose::world() } else { state.pose(b) }
 }
 
