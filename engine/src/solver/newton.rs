@@ -662,18 +662,21 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     if !model.topology.has_cones {
         return solve_newton(model, state, ws);
     }
-    let mut report = solve_active(model, state, ws);
+    let mut report = solve_active(model, state, ws, RETRIES);
     // Activation is a speed heuristic and must never cost a step: a solve that failed with
     // some candidates left out is solved again with every candidate active. (Far candidates
     // hold complementarity pairs that sit on the central path at every κ; with them the mean
     // complementarity, hence the centering, changes, and some stalled solves converge: random
     // scene 543 step 38 stalls at k = 1.3e-8 without them and converges in 13 iterations with.)
+    // Warm, then one cold retry: the Panda's 835 candidates made the second cold retry cost
+    // more than the rest of a run (`step_bench`, 8 × 300 steps: 18.3 → 15.5 ms/step, the same
+    // unconverged steps; the stress suite unchanged; with no cold retry scene 613 fails).
     if !report.status.is_success() && ws.active.iter().any(|a| !a) {
         let iterations = report.iterations;
         ws.active.fill(true);
         ws.attempt += 1;
         restart_warm(model, state, ws);
-        report = solve_active(model, state, ws);
+        report = solve_active(model, state, ws, 1);
         report.iterations += iterations;
     }
     // Candidates left out of the step must not have been reached by it: check each at the new
@@ -697,7 +700,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
         let iterations = report.iterations;
         ws.attempt = 2 + round as u8;
         restart_warm(model, state, ws);
-        report = solve_active(model, state, ws);
+        report = solve_active(model, state, ws, RETRIES);
         report.iterations += iterations;
     }
     if report.status.is_success() {
@@ -727,19 +730,28 @@ fn restart_warm(model: &Model, state: &State, ws: &mut Workspace) {
     super::inequality::initialize(model, state, ws, model.options.warm_start);
 }
 
+/// Cold retries of a failed activated solve ([`solve_active`]).
+const RETRIES: usize = 2;
+
 /// The interior-point solve with the current activation; on failure retried cold, then cold
-/// with unscaled friction-cone rows (each rescues steps the others stall on: a warm start sits
+/// with unscaled friction-cone rows (at most `max_retries` of them) (each rescues steps the others stall on: a warm start sits
 /// on the previous solution's cone boundary, poor when contacts change state; the scaled and
 /// unscaled directions stall in different degenerate configurations). An attempt that stalls
 /// at an acceptable iterate still lets the retries try for full convergence; if they fail, the
 /// acceptable iterate is the result.
-fn solve_active(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
+fn solve_active(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    max_retries: usize,
+) -> StepReport {
     let mut report = super::ipm::solve(model, state, ws);
     let retries: &[bool] = match (model.options.warm_start, model.options.nt_scaling) {
         (true, true) => &[true, false],
         (true, false) | (false, true) => &[false],
         (false, false) => &[],
     };
+    let retries = &retries[..retries.len().min(max_retries)];
     let mut acceptable: Option<StepReport> = None;
     let mut iterations = report.iterations;
     for &scaled in retries {
