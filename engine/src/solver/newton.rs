@@ -669,7 +669,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     // complementarity, hence the centering, changes, and some stalled solves converge: random
     // scene 543 step 38 stalls at k = 1.3e-8 without them and converges in 13 iterations with.)
     // Warm, then one cold retry: the Panda's 835 candidates made the second cold retry cost
-    // more than the rest of a run (`step_bench`, 8 × 300 steps: 18.3 → 15.5 ms/step, the same
+    // more than the rest of a run (`step_bench`, 8 × 300 steps: 16-18 → 14-15 ms/step, the same
     // unconverged steps; the stress suite unchanged; with no cold retry scene 613 fails).
     if !report.status.is_success() && ws.active.iter().any(|a| !a) {
         let iterations = report.iterations;
@@ -734,9 +734,10 @@ fn restart_warm(model: &Model, state: &State, ws: &mut Workspace) {
 const RETRIES: usize = 2;
 
 /// The interior-point solve with the current activation; on failure retried cold, then cold
-/// with unscaled friction-cone rows (at most `max_retries` of them) (each rescues steps the others stall on: a warm start sits
-/// on the previous solution's cone boundary, poor when contacts change state; the scaled and
-/// unscaled directions stall in different degenerate configurations). An attempt that stalls
+/// with unscaled friction-cone rows, at most `max_retries` retries (each rescues steps the
+/// others stall on: a warm start sits on the previous solution's cone boundary, poor when
+/// contacts change state; the scaled and unscaled directions stall in different degenerate
+/// configurations). An attempt that stalls
 /// at an acceptable iterate still lets the retries try for full convergence; if they fail, the
 /// acceptable iterate is the result.
 fn solve_active(
