@@ -18,8 +18,9 @@ def _scene_before_failure(seed: int, step: int):
     return m, tr.final_state
 
 
-# random stress scene 73 (one loose body) stalls at step 86 at h = 0.01 (measured 2026-11-23)
-SEED, STEP = 73, 86
+# random stress scene 267 (one loose body) fails its whole step 33 at h = 0.01 (measured
+# 2026-12-02, after scene 73's step 86 stopped failing with the rolling-consistent slip)
+SEED, STEP = 267, 33
 
 
 def test_failed_step_is_subdivided_and_reported():
@@ -106,7 +107,7 @@ def test_jacobians_through_a_subdivided_step_match_finite_differences():
 
 
 def test_rollout_vjp_through_a_subdivided_contact_step_equals_chained_step_vjps():
-    """Scene 73 (a body landing) subdivides step 86; the reverse sweep over steps 84-87 must give
+    """Scene 267 (a body landing) subdivides step 33; the reverse sweep over steps 31-34 must give
     what chaining ``step_vjp`` gives, at a smoothing κ."""
     m, s = _scene_before_failure(SEED, STEP - 2)
     ctrls = np.zeros((4, m.nu))

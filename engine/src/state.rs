@@ -384,6 +384,8 @@ pub struct Workspace {
     pub(crate) frozen: Vec<Option<crate::contact::Frozen>>,
     /// Contact frames at the current configuration.
     pub(crate) contact_now: Vec<crate::contact::ContactFrame>,
+    /// No-slip measures of the step (current pose), see [`crate::contact::slip`].
+    pub(crate) contact_slip: Vec<crate::contact::slip::Slip>,
     /// Signed distance and its gradient row at the trial next configuration, per contact.
     pub(crate) contact_phi: Vec<f64>,
     pub(crate) contact_dphi: Vec<[f64; 12]>,
@@ -518,6 +520,7 @@ impl Workspace {
             jac: [[0.0; 12]; 3],
         };
         self.contact_now.fill(empty);
+        self.contact_slip.fill(Default::default());
         self.frozen.fill(None);
         self.contact_phi.fill(0.0);
         self.contact_dphi.fill([0.0; 12]);
@@ -608,6 +611,7 @@ impl Workspace {
         };
         Workspace {
             contact_now: vec![empty; model.ncontact()],
+            contact_slip: vec![Default::default(); model.ncontact()],
             frozen: vec![None; model.ncontact()],
             contact_phi: vec![0.0; model.ncontact()],
             contact_dphi: vec![[0.0; 12]; model.ncontact()],

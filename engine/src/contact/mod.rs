@@ -11,11 +11,14 @@
 //! | `Linear` | γ, s, ψ, s_ψ, β ∈ R⁴, η ∈ R⁴ | `s - φ`, `s_ψ - (μγ - Σβ)`, `η - (Dᵀv + ψ)`, complementarities (eqs. 5-10) |
 //!
 //! `φ` is evaluated at the next configuration; the contact impulse acts along the contact frame
-//! of the current configuration (like joint impulses), and `v_t` is the tangential velocity of
-//! the contact point at the next midpoint velocities. Impacts are perfectly inelastic (no
+//! of the current configuration (like joint impulses), and `v_t` is the tangential slip at the
+//! next midpoint velocities, measured consistently with rolling ([`slip`]: the exact
+//! displacement of the feature's core point over the step plus the arc rolled about the
+//! contact; to first order the contact point's velocity). Impacts are perfectly inelastic (no
 //! restitution), as in the paper.
 pub mod cone;
 pub mod geometry;
+pub mod slip;
 pub mod wrench;
 
 use nalgebra::{Matrix3, Vector3};
@@ -119,6 +122,22 @@ pub struct Contact {
     pub model: ContactModel,
     /// Friction coefficient of the pair (max of the two geoms, as MuJoCo).
     pub friction: f64,
+}
+
+impl Contact {
+    /// Rounding radii `(r_a, r_b)` of the two sides: how far each witness point lies from the
+    /// core point fixed in its body along the normal (a ball's or capsule's radius; 0 for a box
+    /// corner, a rim point, an ellipsoid's support point or a plane), see [`slip`].
+    pub fn radii(&self) -> (f64, f64) {
+        match &self.feature {
+            Feature::SpherePlane { a } | Feature::SphereBox { a, .. } => (a.radius, 0.0),
+            Feature::SphereSphere { a, b } => (a.radius, b.radius),
+            Feature::SphereCapsule { a, b } => (a.radius, b.radius),
+            Feature::CapsuleCapsule { a, b } => (a.radius, b.radius),
+            Feature::BoxSphere { b, .. } => (0.0, b.radius),
+            Feature::DiskPlane { .. } | Feature::EllipsoidPlane { .. } => (0.0, 0.0),
+        }
+    }
 }
 
 /// Contact frame at one configuration: world normal and tangents, witness arms, and the

@@ -14,6 +14,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::contact::cone::{NtScaling, arrow, orthant_step, soc_product, soc_step};
+use crate::contact::slip::Slip;
 use crate::contact::{ContactFrame, ContactModel, Frozen, predicted_pose, witness_frozen};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::model::Model;
@@ -196,6 +197,7 @@ pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace
     );
     let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
     ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);
+    ws.contact_slip[c] = Slip::new(&w, contact.radii(), &pa, &pb);
 }
 
 /// Largest distance (m) from a body's centre of mass to any point of `geom` (infinite for a
@@ -424,23 +426,18 @@ pub(crate) fn evaluate(
     violations(model, &ws.active, &ws.saturated, w, residual, kappa)
 }
 
-/// Row `k` (0 normal, 1-2 tangential) of contact `c`'s relative velocity at the body
-/// velocities of the iterate `w` (the next midpoint velocities), through the contact frame at
-/// the current configuration.
-fn contact_velocity(model: &Model, ws: &Workspace, c: usize, w: &[f64], k: usize) -> f64 {
+/// Tangential slip `k` (1, 2) of contact `c` at the body velocities of the iterate `w` (the
+/// next midpoint velocities), and its row `∂/∂(v_a, ω_a, v_b, ω_b)` ([`Slip`]).
+fn contact_slip(model: &Model, ws: &Workspace, c: usize, w: &[f64], k: usize) -> (f64, [f64; 12]) {
     let t = &model.topology;
-    let now = &ws.contact_now[c].jac;
-    let [a, b] = t.contact_bodies[c];
-    let mut v = 0.0;
-    for (side, body) in [(0, a), (1, b)] {
+    let mut motion = [(Vector3::zeros(), Vector3::zeros()); 2];
+    for (side, body) in t.contact_bodies[c].into_iter().enumerate() {
         if let Some(bn) = body_node(body) {
             let ob = t.pattern.offset(bn);
-            v += (0..6)
-                .map(|i| now[k][6 * side + i] * w[ob + i])
-                .sum::<f64>();
+            motion[side] = (v3(w, ob), v3(w, ob + 3));
         }
     }
-    v
+    ws.contact_slip[c].tangential(model.options.timestep, motion, k - 1)
 }
 
 /// Residual rows of contact `c` and its impulse on the bodies.
@@ -451,7 +448,7 @@ fn contact_rows(model: &Model, ws: &Workspace, c: usize, w: &[f64], residual: &m
     let x = &w[o..o + contact.model.dim()];
     let (mu, phi) = (contact.friction, ws.contact_phi[c]);
     let now = &ws.contact_now[c].jac;
-    let vt = |k: usize| contact_velocity(model, ws, c, w, k);
+    let vt = |k: usize| contact_slip(model, ws, c, w, k).0;
     let r = &mut residual[o..o + contact.model.dim()];
     let force: [f64; 3] = match contact.model {
         ContactModel::Impact => {
@@ -599,6 +596,10 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             ws.saturated[c],
             &mut ws.matrix.values[diag..diag + dim * dim],
         );
+        let slip_rows = match contact.model {
+            ContactModel::Impact => [[0.0; 12]; 2],
+            _ => [1, 2].map(|k| contact_slip(model, ws, c, w, k).1),
+        };
         let [a, b] = t.contact_bodies[c];
         for (side, body) in [(0, a), (1, b)] {
             let Some((row_n, row_b)) = t.contact_blocks[c][side] else {
@@ -619,8 +620,9 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
                 ContactModel::Linear => &[(2, 1, 1.0), (3, 1, -1.0), (4, 2, 1.0), (5, 2, -1.0)],
             };
             for &(row, dir, sign) in tangential {
+                let slip = slip_rows[dir - 1];
                 for k in 0..6 {
-                    vals[row_n + 6 * row + k] = -sign * now[dir][6 * side + k];
+                    vals[row_n + 6 * row + k] = -sign * slip[6 * side + k];
                 }
             }
             // body rows × node cols: -J_cᵀ on the force variables
