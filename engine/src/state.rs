@@ -384,8 +384,9 @@ pub struct Workspace {
     pub(crate) frozen: Vec<Option<crate::contact::Frozen>>,
     /// Contact frames at the current configuration.
     pub(crate) contact_now: Vec<crate::contact::ContactFrame>,
-    /// No-slip measures of the step (current pose), see [`crate::contact::slip`].
-    pub(crate) contact_slip: Vec<crate::contact::slip::Slip>,
+    /// No-slip measures of the step (current pose, built on first use), see
+    /// [`crate::contact::slip`].
+    pub(crate) contact_slip: Vec<crate::contact::slip::LazySlip>,
     /// Signed distance and its gradient row at the trial next configuration, per contact.
     pub(crate) contact_phi: Vec<f64>,
     pub(crate) contact_dphi: Vec<[f64; 12]>,

@@ -53,18 +53,25 @@ impl Side {
         }
     }
 
-    /// `Rᵀt_k · (R f)` (the rotational part of `t_k · V`) and its gradient in the body angular
-    /// velocity `w`, with `f = c_h (ω × ρ) + (h/2) ω × (ω × ρ) + ω × e`.
-    fn turning(&self, h: f64, w: &Vector3<f64>, k: usize) -> (f64, Vector3<f64>) {
+    /// The body-frame motion of the contact relative to the centre of mass, `f = c_h (ω × ρ) +
+    /// (h/2) ω × (ω × ρ) + ω × e` (`t_k · V = t_k · v + (Rᵀt_k) · f`), at body angular velocity
+    /// `w`.
+    fn turning(&self, h: f64, w: &Vector3<f64>) -> Vector3<f64> {
+        let (rho, e) = (&self.core, &self.offset);
+        let c = (1.0 - (w * (0.5 * h)).norm_squared()).max(1e-300).sqrt();
+        let wr = w.cross(rho);
+        c * wr + (0.5 * h) * w.cross(&wr) + w.cross(e)
+    }
+
+    /// `∂((Rᵀt_k) · f)/∂w` (see [`Side::turning`]).
+    fn turning_gradient(&self, h: f64, w: &Vector3<f64>, k: usize) -> Vector3<f64> {
         let (rho, e, u) = (&self.core, &self.offset, &self.tangents[k]);
         let c = (1.0 - (w * (0.5 * h)).norm_squared()).max(1e-300).sqrt();
         let wr = w.cross(rho);
-        let f = c * wr + (0.5 * h) * w.cross(&wr) + w.cross(e);
-        let grad = c * rho.cross(u)
+        c * rho.cross(u)
             - (h * h / (4.0 * c)) * u.dot(&wr) * w
             - (0.5 * h) * (u.cross(&wr) + u.cross(w).cross(rho))
-            - u.cross(e);
-        (u.dot(&f), grad)
+            - u.cross(e)
     }
 }
 
@@ -93,27 +100,61 @@ impl Slip {
         }
     }
 
-    /// Tangential slip `t_k · (V_a − V_b)` (`k` = 0, 1) at the next midpoint velocities
-    /// `(v, ω_body)` of body a and body b, and its row `∂/∂(v_a, ω_a, v_b, ω_b)`.
-    pub fn tangential(
-        &self,
-        h: f64,
-        motion: [(Vector3<f64>, Vector3<f64>); 2],
-        k: usize,
-    ) -> (f64, [f64; 12]) {
-        let t = &self.tangents[k];
-        let mut value = 0.0;
-        let mut row = [0.0; 12];
+    /// Tangential slip `t_k · (V_a − V_b)`, `k` = 0, 1, at the next midpoint velocities
+    /// `(v, ω_body)` of body a and body b.
+    pub fn tangential(&self, h: f64, motion: &[(Vector3<f64>, Vector3<f64>); 2]) -> [f64; 2] {
+        let mut slip = [0.0; 2];
         for (side, sign) in [(0, 1.0), (1, -1.0)] {
             let (v, w) = &motion[side];
-            let (turn, grad) = self.sides[side].turning(h, w, k);
-            value += sign * (t.dot(v) + turn);
-            for i in 0..3 {
-                row[6 * side + i] = sign * t[i];
-                row[6 * side + 3 + i] = sign * grad[i];
+            let f = self.sides[side].turning(h, w);
+            for (k, s) in slip.iter_mut().enumerate() {
+                *s += sign * (self.tangents[k].dot(v) + self.sides[side].tangents[k].dot(&f));
             }
         }
-        (value, row)
+        slip
+    }
+
+    /// Rows `∂/∂(v_a, ω_a, v_b, ω_b)` of [`Slip::tangential`].
+    pub fn rows(&self, h: f64, motion: &[(Vector3<f64>, Vector3<f64>); 2]) -> [[f64; 12]; 2] {
+        let mut rows = [[0.0; 12]; 2];
+        for (k, row) in rows.iter_mut().enumerate() {
+            let t = &self.tangents[k];
+            for (side, sign) in [(0, 1.0), (1, -1.0)] {
+                let grad = self.sides[side].turning_gradient(h, &motion[side].1, k);
+                for i in 0..3 {
+                    row[6 * side + i] = sign * t[i];
+                    row[6 * side + 3 + i] = sign * grad[i];
+                }
+            }
+        }
+        rows
+    }
+}
+
+/// A candidate's [`Slip`], built on first use: `prepare` visits every candidate of a model each
+/// step (1024 on the A1) but only the few active ones are ever evaluated.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LazySlip {
+    /// The witness and body poses to build from, until built.
+    source: Option<(Witness, Pose, Pose)>,
+    slip: Slip,
+}
+
+impl LazySlip {
+    /// To be built from the candidate's witness at the current poses of its bodies.
+    pub fn new(w: Witness, body_a: Pose, body_b: Pose) -> Self {
+        LazySlip {
+            source: Some((w, body_a, body_b)),
+            slip: Slip::default(),
+        }
+    }
+
+    /// The slip measure, built now if it was not yet (`radii` as for [`Slip::new`]).
+    pub fn get(&mut self, radii: (f64, f64)) -> &Slip {
+        if let Some((w, a, b)) = self.source.take() {
+            self.slip = Slip::new(&w, radii, &a, &b);
+        }
+        &self.slip
     }
 }
 
@@ -177,7 +218,7 @@ mod tests {
         let basis = basis_from_axis(&w.normal);
         for k in 0..2 {
             let want = basis.column(k + 1).dot(&(va - vb));
-            let (got, _) = slip.tangential(h, motion, k);
+            let got = slip.tangential(h, &motion)[k];
             assert!(
                 (got - want).abs() < 1e-12 * want.abs().max(1.0),
                 "k {k}: {got} vs {want}"
@@ -210,14 +251,14 @@ mod tests {
             ]
         };
         for k in 0..2 {
-            let (_, row) = slip.tangential(h, motion(&x0), k);
+            let row = slip.rows(h, &motion(&x0))[k];
             for i in 0..12 {
                 let eps = 1e-6;
                 let (mut xp, mut xm) = (x0, x0);
                 xp[i] += eps;
                 xm[i] -= eps;
-                let fd = (slip.tangential(h, motion(&xp), k).0
-                    - slip.tangential(h, motion(&xm), k).0)
+                let fd = (slip.tangential(h, &motion(&xp))[k]
+                    - slip.tangential(h, &motion(&xm))[k])
                     / (2.0 * eps);
                 assert!(
                     (row[i] - fd).abs() < 1e-8,
@@ -243,7 +284,7 @@ mod tests {
             (Vector3::new(-0.5, 0.1, 0.7), Vector3::new(-3.0, 1.0, 9.0)),
         ];
         for k in 0..2 {
-            let (_, row) = slip.tangential(0.0, motion, k);
+            let row = slip.rows(0.0, &motion)[k];
             for (i, (got, want)) in row.iter().zip(frame.jac[k + 1]).enumerate() {
                 assert!((got - want).abs() < 1e-12, "k {k} col {i}: {got} vs {want}");
             }

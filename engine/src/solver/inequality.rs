@@ -14,7 +14,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::contact::cone::{NtScaling, arrow, orthant_step, soc_product, soc_step};
-use crate::contact::slip::Slip;
+use crate::contact::slip::LazySlip;
 use crate::contact::{ContactFrame, ContactModel, Frozen, predicted_pose, witness_frozen};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::model::Model;
@@ -197,7 +197,7 @@ pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace
     );
     let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
     ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);
-    ws.contact_slip[c] = Slip::new(&w, contact.radii(), &pa, &pb);
+    ws.contact_slip[c] = LazySlip::new(w, pa, pb);
 }
 
 /// Largest distance (m) from a body's centre of mass to any point of `geom` (infinite for a
@@ -386,7 +386,11 @@ pub(crate) fn evaluate(
         let frame = ContactFrame::new(&wit, &pa, &pb);
         ws.contact_phi[c] = wit.phi;
         ws.contact_dphi[c] = frame.jac[0];
-        contact_rows(model, ws, c, w, residual);
+        let motion = contact_motion(model, c, w);
+        let slip = ws.contact_slip[c]
+            .get(contact.radii())
+            .tangential(model.options.timestep, &motion);
+        contact_rows(model, ws, c, w, slip, residual);
     }
     for (j, joint) in model.joints.iter().enumerate() {
         let Some(n) = t.limit_node[j] else { continue };
@@ -426,9 +430,9 @@ pub(crate) fn evaluate(
     violations(model, &ws.active, &ws.saturated, w, residual, kappa)
 }
 
-/// Tangential slip `k` (1, 2) of contact `c` at the body velocities of the iterate `w` (the
-/// next midpoint velocities), and its row `∂/∂(v_a, ω_a, v_b, ω_b)` ([`Slip`]).
-fn contact_slip(model: &Model, ws: &Workspace, c: usize, w: &[f64], k: usize) -> (f64, [f64; 12]) {
+/// The velocities `(v, ω_body)` of contact `c`'s two bodies in the iterate `w` (the next
+/// midpoint velocities; zero for the world).
+fn contact_motion(model: &Model, c: usize, w: &[f64]) -> [(Vector3<f64>, Vector3<f64>); 2] {
     let t = &model.topology;
     let mut motion = [(Vector3::zeros(), Vector3::zeros()); 2];
     for (side, body) in t.contact_bodies[c].into_iter().enumerate() {
@@ -437,18 +441,26 @@ fn contact_slip(model: &Model, ws: &Workspace, c: usize, w: &[f64], k: usize) ->
             motion[side] = (v3(w, ob), v3(w, ob + 3));
         }
     }
-    ws.contact_slip[c].tangential(model.options.timestep, motion, k - 1)
+    motion
 }
 
-/// Residual rows of contact `c` and its impulse on the bodies.
-fn contact_rows(model: &Model, ws: &Workspace, c: usize, w: &[f64], residual: &mut [f64]) {
+/// Residual rows of contact `c` and its impulse on the bodies, given its tangential `slip` at
+/// `w` ([`crate::contact::slip::Slip::tangential`]).
+fn contact_rows(
+    model: &Model,
+    ws: &Workspace,
+    c: usize,
+    w: &[f64],
+    slip: [f64; 2],
+    residual: &mut [f64],
+) {
     let t = &model.topology;
     let contact = &model.contacts[c];
     let o = t.pattern.offset(t.contact_node[c]);
     let x = &w[o..o + contact.model.dim()];
     let (mu, phi) = (contact.friction, ws.contact_phi[c]);
     let now = &ws.contact_now[c].jac;
-    let vt = |k: usize| contact_slip(model, ws, c, w, k).0;
+    let vt = |k: usize| slip[k - 1];
     let r = &mut residual[o..o + contact.model.dim()];
     let force: [f64; 3] = match contact.model {
         ContactModel::Impact => {
@@ -598,7 +610,9 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
         );
         let slip_rows = match contact.model {
             ContactModel::Impact => [[0.0; 12]; 2],
-            _ => [1, 2].map(|k| contact_slip(model, ws, c, w, k).1),
+            _ => ws.contact_slip[c]
+                .get(contact.radii())
+                .rows(h, &contact_motion(model, c, w)),
         };
         let [a, b] = t.contact_bodies[c];
         for (side, body) in [(0, a), (1, b)] {
