@@ -382,11 +382,11 @@ pub struct Workspace {
     /// Per candidate: the feature held fixed for this step (a near-flat disk's rim point, a box
     /// corner's face), see [`crate::contact::freeze_for_step`].
     pub(crate) frozen: Vec<Option<crate::contact::Frozen>>,
-    /// Contact frames at the current configuration.
-    pub(crate) contact_now: Vec<crate::contact::ContactFrame>,
-    /// No-slip measures of the step (current pose, built on first use), see
-    /// [`crate::contact::slip`].
-    pub(crate) contact_slip: Vec<crate::contact::slip::LazySlip>,
+    /// Signed distance of each candidate at the current configuration.
+    pub(crate) contact_phi_now: Vec<f64>,
+    /// Impulse rows and no-slip measures of the step (current configuration, built on first
+    /// use).
+    pub(crate) contact_step: Vec<crate::contact::StepRows>,
     /// Signed distance and its gradient row at the trial next configuration, per contact.
     pub(crate) contact_phi: Vec<f64>,
     pub(crate) contact_dphi: Vec<[f64; 12]>,
@@ -516,12 +516,8 @@ impl Workspace {
     /// Back to the state of [`Workspace::new`] in everything but the large numeric buffers
     /// (iterate, residual, directions, matrix values), which every use writes before it reads.
     fn reset(&mut self, model: &Model) {
-        let empty = crate::contact::ContactFrame {
-            phi: 0.0,
-            jac: [[0.0; 12]; 3],
-        };
-        self.contact_now.fill(empty);
-        self.contact_slip.fill(Default::default());
+        self.contact_phi_now.fill(0.0);
+        self.contact_step.fill(Default::default());
         self.frozen.fill(None);
         self.contact_phi.fill(0.0);
         self.contact_dphi.fill([0.0; 12]);
@@ -606,13 +602,9 @@ impl Workspace {
             limit_adr.push(nlim);
             nlim += j.limits.len();
         }
-        let empty = crate::contact::ContactFrame {
-            phi: 0.0,
-            jac: [[0.0; 12]; 3],
-        };
         Workspace {
-            contact_now: vec![empty; model.ncontact()],
-            contact_slip: vec![Default::default(); model.ncontact()],
+            contact_phi_now: vec![0.0; model.ncontact()],
+            contact_step: vec![Default::default(); model.ncontact()],
             frozen: vec![None; model.ncontact()],
             contact_phi: vec![0.0; model.ncontact()],
             contact_dphi: vec![[0.0; 12]; model.ncontact()],

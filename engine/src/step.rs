@@ -240,10 +240,10 @@ pub(crate) fn gains_energy(model: &Model, start: &State, next: &State, ws: &Work
 fn depenetration_work(model: &Model, ws: &Workspace) -> f64 {
     let t = &model.topology;
     (0..model.ncontact())
-        .filter(|&c| ws.active[c] && ws.contact_now[c].phi < 0.0)
+        .filter(|&c| ws.active[c] && ws.contact_phi_now[c] < 0.0)
         .map(|c| {
             let gamma = ws.w[t.pattern.offset(t.contact_node[c])];
-            gamma.max(0.0) * -ws.contact_now[c].phi / model.options.timestep
+            gamma.max(0.0) * -ws.contact_phi_now[c] / model.options.timestep
         })
         .sum()
 }

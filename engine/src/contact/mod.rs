@@ -155,24 +155,67 @@ impl ContactFrame {
     /// From a witness and the two bodies' COM poses.
     pub fn new(w: &Witness, body_a: &Pose, body_b: &Pose) -> Self {
         let basis = basis_from_axis(&w.normal);
-        let (ra, rb) = (quat::rotation(&body_a.quat), quat::rotation(&body_b.quat));
-        let (arm_a, arm_b) = (w.point_a - body_a.pos, w.point_b - body_b.pos);
         let mut jac = [[0.0; 12]; 3];
         for (k, row) in jac.iter_mut().enumerate() {
-            let d: Vector3<f64> = basis.column(k).into_owned();
-            // d · (v + R ω_b × r) = dᵀ v + (Rᵀ (r × d))ᵀ ω_b
-            let (ja, jb) = (
-                ra.transpose() * arm_a.cross(&d),
-                rb.transpose() * arm_b.cross(&d),
-            );
-            for i in 0..3 {
-                row[i] = d[i];
-                row[3 + i] = ja[i];
-                row[6 + i] = -d[i];
-                row[9 + i] = -jb[i];
-            }
+            *row = velocity_row(w, body_a, body_b, &basis.column(k).into_owned());
         }
         ContactFrame { phi: w.phi, jac }
+    }
+
+    /// The normal row of [`ContactFrame::new`]'s Jacobian alone (the gap's gradient).
+    pub fn normal_row(w: &Witness, body_a: &Pose, body_b: &Pose) -> [f64; 12] {
+        velocity_row(w, body_a, body_b, &w.normal)
+    }
+}
+
+/// `d · (v_a(w_a) − v_b(w_b))` at the witness points as a row in `(v, ω_body)` of a and b.
+fn velocity_row(w: &Witness, body_a: &Pose, body_b: &Pose, d: &Vector3<f64>) -> [f64; 12] {
+    let (ra, rb) = (quat::rotation(&body_a.quat), quat::rotation(&body_b.quat));
+    let (arm_a, arm_b) = (w.point_a - body_a.pos, w.point_b - body_b.pos);
+    // d · (v + R ω_b × r) = dᵀ v + (Rᵀ (r × d))ᵀ ω_b
+    let (ja, jb) = (
+        ra.transpose() * arm_a.cross(d),
+        rb.transpose() * arm_b.cross(d),
+    );
+    let mut row = [0.0; 12];
+    for i in 0..3 {
+        row[i] = d[i];
+        row[3 + i] = ja[i];
+        row[6 + i] = -d[i];
+        row[9 + i] = -jb[i];
+    }
+    row
+}
+
+/// A candidate's rows for one step at its current poses, built on first use: the impulse
+/// directions (the Jacobian of [`ContactFrame`]) and the no-slip measure ([`slip::Slip`]).
+/// `prepare` visits every candidate of a model each step (1024 on the A1), but only the active
+/// few are ever evaluated.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StepRows {
+    /// The witness and body poses to build from, until built.
+    source: Option<(Witness, Pose, Pose)>,
+    jac: [[f64; 12]; 3],
+    slip: slip::Slip,
+}
+
+impl StepRows {
+    /// To be built from the candidate's witness at the current poses of its bodies.
+    pub fn new(w: Witness, body_a: Pose, body_b: Pose) -> Self {
+        StepRows {
+            source: Some((w, body_a, body_b)),
+            ..Default::default()
+        }
+    }
+
+    /// The impulse rows (n, t1, t2 of [`ContactFrame::jac`]) and the slip measure, built now if
+    /// they were not yet (`radii` as for [`slip::Slip::new`]).
+    pub fn get(&mut self, radii: (f64, f64)) -> (&[[f64; 12]; 3], &slip::Slip) {
+        if let Some((w, a, b)) = self.source.take() {
+            self.jac = ContactFrame::new(&w, &a, &b).jac;
+            self.slip = slip::Slip::new(&w, radii, &a, &b);
+        }
+        (&self.jac, &self.slip)
     }
 }
 

@@ -131,33 +131,6 @@ impl Slip {
     }
 }
 
-/// A candidate's [`Slip`], built on first use: `prepare` visits every candidate of a model each
-/// step (1024 on the A1) but only the few active ones are ever evaluated.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct LazySlip {
-    /// The witness and body poses to build from, until built.
-    source: Option<(Witness, Pose, Pose)>,
-    slip: Slip,
-}
-
-impl LazySlip {
-    /// To be built from the candidate's witness at the current poses of its bodies.
-    pub fn new(w: Witness, body_a: Pose, body_b: Pose) -> Self {
-        LazySlip {
-            source: Some((w, body_a, body_b)),
-            slip: Slip::default(),
-        }
-    }
-
-    /// The slip measure, built now if it was not yet (`radii` as for [`Slip::new`]).
-    pub fn get(&mut self, radii: (f64, f64)) -> &Slip {
-        if let Some((w, a, b)) = self.source.take() {
-            self.slip = Slip::new(&w, radii, &a, &b);
-        }
-        &self.slip
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

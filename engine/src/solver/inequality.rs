@@ -14,8 +14,9 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::contact::cone::{NtScaling, arrow, orthant_step, soc_product, soc_step};
-use crate::contact::slip::LazySlip;
-use crate::contact::{ContactFrame, ContactModel, Frozen, predicted_pose, witness_frozen};
+use crate::contact::{
+    ContactFrame, ContactModel, Frozen, StepRows, predicted_pose, witness_frozen,
+};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::model::Model;
 use crate::model::topology_body_node as body_node;
@@ -196,8 +197,8 @@ pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace
         ),
     );
     let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
-    ws.contact_now[c] = ContactFrame::new(&w, &pa, &pb);
-    ws.contact_slip[c] = LazySlip::new(w, pa, pb);
+    ws.contact_phi_now[c] = w.phi;
+    ws.contact_step[c] = StepRows::new(w, pa, pb);
 }
 
 /// Largest distance (m) from a body's centre of mass to any point of `geom` (infinite for a
@@ -245,7 +246,7 @@ pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace) {
         );
         let reach = margin + 2.0 * h * speed + drift;
         // NaN distances or speeds stay active (the solve then reports them)
-        let phi = ws.contact_now[c].phi;
+        let phi = ws.contact_phi_now[c];
         ws.active[c] = phi.is_nan() || reach.is_nan() || phi <= reach;
     }
 }
@@ -383,14 +384,12 @@ pub(crate) fn evaluate(
             },
             ws.frozen[c],
         );
-        let frame = ContactFrame::new(&wit, &pa, &pb);
         ws.contact_phi[c] = wit.phi;
-        ws.contact_dphi[c] = frame.jac[0];
+        ws.contact_dphi[c] = ContactFrame::normal_row(&wit, &pa, &pb);
         let motion = contact_motion(model, c, w);
-        let slip = ws.contact_slip[c]
-            .get(contact.radii())
-            .tangential(model.options.timestep, &motion);
-        contact_rows(model, ws, c, w, slip, residual);
+        let (jac, slip) = ws.contact_step[c].get(contact.radii());
+        let (jac, slip) = (*jac, slip.tangential(model.options.timestep, &motion));
+        contact_rows(model, ws, c, w, &jac, slip, residual);
     }
     for (j, joint) in model.joints.iter().enumerate() {
         let Some(n) = t.limit_node[j] else { continue };
@@ -444,13 +443,15 @@ fn contact_motion(model: &Model, c: usize, w: &[f64]) -> [(Vector3<f64>, Vector3
     motion
 }
 
-/// Residual rows of contact `c` and its impulse on the bodies, given its tangential `slip` at
-/// `w` ([`crate::contact::slip::Slip::tangential`]).
+/// Residual rows of contact `c` and its impulse on the bodies along the rows `now` of its
+/// current contact frame, given its tangential `slip` at `w`
+/// ([`crate::contact::slip::Slip::tangential`]).
 fn contact_rows(
     model: &Model,
     ws: &Workspace,
     c: usize,
     w: &[f64],
+    now: &[[f64; 12]; 3],
     slip: [f64; 2],
     residual: &mut [f64],
 ) {
@@ -459,7 +460,6 @@ fn contact_rows(
     let o = t.pattern.offset(t.contact_node[c]);
     let x = &w[o..o + contact.model.dim()];
     let (mu, phi) = (contact.friction, ws.contact_phi[c]);
-    let now = &ws.contact_now[c].jac;
     let vt = |k: usize| slip[k - 1];
     let r = &mut residual[o..o + contact.model.dim()];
     let force: [f64; 3] = match contact.model {
@@ -608,11 +608,11 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             ws.saturated[c],
             &mut ws.matrix.values[diag..diag + dim * dim],
         );
+        let (now, slip) = ws.contact_step[c].get(contact.radii());
+        let now = *now;
         let slip_rows = match contact.model {
             ContactModel::Impact => [[0.0; 12]; 2],
-            _ => ws.contact_slip[c]
-                .get(contact.radii())
-                .rows(h, &contact_motion(model, c, w)),
+            _ => slip.rows(h, &contact_motion(model, c, w)),
         };
         let [a, b] = t.contact_bodies[c];
         for (side, body) in [(0, a), (1, b)] {
@@ -621,7 +621,6 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             };
             let dphi = ws.contact_dphi[c];
             let chain = chain_row(&dphi[6 * side..6 * side + 6], h, &ws.dphi[body]);
-            let now = ws.contact_now[c].jac;
             let vals = &mut ws.matrix.values;
             // node rows × body cols
             let phi_row = 0;
@@ -925,7 +924,7 @@ pub(crate) fn store(model: &Model, state: &mut State, ws: &Workspace) {
             x.copy_from_slice(&ws.w[o..o + dim]);
         } else {
             x.fill(0.0);
-            x[1] = ws.contact_now[c].phi.max(0.0);
+            x[1] = ws.contact_phi_now[c].max(0.0);
         }
         k += dim;
     }
