@@ -289,18 +289,47 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
             continue;
         }
         let next = &ws.next_pose;
-        let (wit, _, _) = witness_frozen(
-            contact,
-            &model.geoms,
-            |x| if x == 0 { Pose::world() } else { next[x] },
-            ws.frozen[c],
-        );
+        let pose = |x: usize| if x == 0 { Pose::world() } else { next[x] };
+        // far apart by the geoms' bounds alone: no narrow phase (a frozen feature is measured
+        // against its own plane, which such a bound does not cover)
+        if ws.frozen[c].is_none() && distance_bound(model, contact, pose) > floor {
+            continue;
+        }
+        let (wit, _, _) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
         if wit.phi.is_nan() || wit.phi <= floor {
             ws.active[c] = true;
             n += 1;
         }
     }
     n
+}
+
+/// A lower bound on the distance between the two geoms of `contact` at the body poses `pose`
+/// (`-∞` where none is cheap): the distance between the bodies' centres of mass less the
+/// geoms' reaches ([`geom_reach`]), or for a plane the other body's centre's height above it
+/// less the other geom's reach.
+fn distance_bound(
+    model: &Model,
+    contact: &crate::contact::Contact,
+    pose: impl Fn(usize) -> Pose,
+) -> f64 {
+    use crate::contact::geometry::Shape;
+    let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
+    let (ra, rb) = (geom_reach(ga), geom_reach(gb));
+    if ra.is_finite() && rb.is_finite() {
+        return (pose(ga.body).pos - pose(gb.body).pos).norm() - ra - rb;
+    }
+    let (plane, other, reach) = if matches!(ga.shape, Shape::Plane) {
+        (ga, gb, rb)
+    } else {
+        (gb, ga, ra)
+    };
+    if !matches!(plane.shape, Shape::Plane) || !reach.is_finite() {
+        return f64::NEG_INFINITY;
+    }
+    let frame = plane.world_pose(&pose(plane.body));
+    let normal = frame.rot.column(2);
+    normal.dot(&(pose(other.body).pos - frame.pos)) - reach
 }
 
 /// Penetration (m) of the exact disk rim that a solve with frozen rim points may leave before
