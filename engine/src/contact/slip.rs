@@ -158,21 +158,33 @@ mod tests {
         }
     }
 
+    /// Two tilted bodies, a witness between them, radii (0.05, 0.02).
+    fn scene() -> (Pose, Pose, Witness, (f64, f64)) {
+        (
+            pose([0.1, -0.2, 0.4], [1.0, 2.0, 0.5], 0.7),
+            pose([0.0, 0.3, -0.1], [0.0, 1.0, 1.0], -0.4),
+            witness([0.05, 0.0, 0.02], [0.05, 0.01, -0.01], [0.2, 0.1, 1.0]),
+            (0.05, 0.02),
+        )
+    }
+
+    /// Velocities `(v_a, ω_a, v_b, ω_b)` of the test bodies.
+    const MOTION: [f64; 12] = [
+        0.3, -1.0, 0.2, 4.0, -7.0, 2.0, -0.5, 0.1, 0.7, -3.0, 1.0, 9.0,
+    ];
+
+    fn motion(x: &[f64; 12]) -> [(Vector3<f64>, Vector3<f64>); 2] {
+        let v = |i: usize| Vector3::new(x[i], x[i + 1], x[i + 2]);
+        [(v(0), v(3)), (v(6), v(9))]
+    }
+
     #[test]
     fn slip_is_the_core_displacement_plus_the_rolled_arc() {
         // V_a = (c⁺ − c)/h + ω × (p − c) with c⁺ from the integrator's own pose update
         let h = 0.01;
-        let (a, b) = (
-            pose([0.1, -0.2, 0.4], [1.0, 2.0, 0.5], 0.7),
-            pose([0.0, 0.3, -0.1], [0.0, 1.0, 1.0], -0.4),
-        );
-        let w = witness([0.05, 0.0, 0.02], [0.05, 0.01, -0.01], [0.2, 0.1, 1.0]);
-        let (ra, rb) = (0.05, 0.02);
+        let (a, b, w, (ra, rb)) = scene();
         let slip = Slip::new(&w, (ra, rb), &a, &b);
-        let motion = [
-            (Vector3::new(0.3, -1.0, 0.2), Vector3::new(4.0, -7.0, 2.0)),
-            (Vector3::new(-0.5, 0.1, 0.7), Vector3::new(-3.0, 1.0, 9.0)),
-        ];
+        let motion = motion(&MOTION);
         let side_velocity = |body: &Pose,
                              (v, om): &(Vector3<f64>, Vector3<f64>),
                              point: Vector3<f64>,
@@ -202,27 +214,9 @@ mod tests {
     #[test]
     fn slip_rows_are_its_derivatives() {
         let h = 0.02;
-        let (a, b) = (
-            pose([0.1, -0.2, 0.4], [1.0, 2.0, 0.5], 0.7),
-            pose([0.0, 0.3, -0.1], [0.0, 1.0, 1.0], -0.4),
-        );
-        let w = witness([0.05, 0.0, 0.02], [0.05, 0.01, -0.01], [0.2, 0.1, 1.0]);
-        let slip = Slip::new(&w, (0.05, 0.02), &a, &b);
-        let x0 = [
-            0.3, -1.0, 0.2, 4.0, -7.0, 2.0, -0.5, 0.1, 0.7, -3.0, 1.0, 9.0,
-        ];
-        let motion = |x: &[f64; 12]| {
-            [
-                (
-                    Vector3::new(x[0], x[1], x[2]),
-                    Vector3::new(x[3], x[4], x[5]),
-                ),
-                (
-                    Vector3::new(x[6], x[7], x[8]),
-                    Vector3::new(x[9], x[10], x[11]),
-                ),
-            ]
-        };
+        let (a, b, w, radii) = scene();
+        let slip = Slip::new(&w, radii, &a, &b);
+        let x0 = MOTION;
         for k in 0..2 {
             let row = slip.rows(h, &motion(&x0))[k];
             for i in 0..12 {
@@ -245,17 +239,10 @@ mod tests {
     #[test]
     fn to_first_order_slip_is_the_contact_point_velocity() {
         // h → 0: t · (v + ω × (p − x)) on each side, the classical rows (ContactFrame)
-        let (a, b) = (
-            pose([0.1, -0.2, 0.4], [1.0, 2.0, 0.5], 0.7),
-            pose([0.0, 0.3, -0.1], [0.0, 1.0, 1.0], -0.4),
-        );
-        let w = witness([0.05, 0.0, 0.02], [0.05, 0.01, -0.01], [0.2, 0.1, 1.0]);
-        let slip = Slip::new(&w, (0.05, 0.02), &a, &b);
+        let (a, b, w, radii) = scene();
+        let slip = Slip::new(&w, radii, &a, &b);
         let frame = super::super::ContactFrame::new(&w, &a, &b);
-        let motion = [
-            (Vector3::new(0.3, -1.0, 0.2), Vector3::new(4.0, -7.0, 2.0)),
-            (Vector3::new(-0.5, 0.1, 0.7), Vector3::new(-3.0, 1.0, 9.0)),
-        ];
+        let motion = motion(&MOTION);
         for k in 0..2 {
             let row = slip.rows(0.0, &motion)[k];
             for (i, (got, want)) in row.iter().zip(frame.jac[k + 1]).enumerate() {
