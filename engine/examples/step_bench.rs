@@ -34,7 +34,8 @@ fn main() {
             None => workload::Controls::new(),
         };
         let ctrls: Vec<Vec<f64>> = (0..steps).map(|_| controls.next(&model)).collect();
-        let (mut its, mut failed, mut subdivided, mut active) = (Vec::new(), 0, 0, 0);
+        let (mut its, mut failed, mut subdivided, mut active, mut loaded) =
+            (Vec::new(), 0, 0, 0, 0);
         let t0 = Instant::now();
         for ctrl in &ctrls {
             let r = step(&model, &mut state, &mut ws, ctrl).unwrap();
@@ -42,6 +43,11 @@ fn main() {
             failed += usize::from(!r.status.is_success());
             subdivided += usize::from(r.subdivisions > 1);
             active += ws.active_contacts();
+            loaded += state
+                .contact_impulse(&model)
+                .chunks(3)
+                .filter(|f| f[0] > 1e-5)
+                .count();
         }
         best = best.min(t0.elapsed().as_secs_f64());
         let mut print = 0u64;
@@ -52,18 +58,19 @@ fn main() {
                 print = print.rotate_left(5) ^ x.to_bits();
             }
         }
-        last = Some((its, failed, subdivided, active, print));
+        last = Some((its, failed, subdivided, active, loaded, print));
     }
-    let (mut its, failed, subdivided, active, print) = last.unwrap();
+    let (mut its, failed, subdivided, active, loaded, print) = last.unwrap();
     let total: usize = its.iter().sum();
     its.sort_unstable();
     println!(
-        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {}; unconverged {failed}, subdivided {subdivided}; active candidates {:.1} of {}; state fingerprint {print:016x}",
+        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {}; unconverged {failed}, subdivided {subdivided}; active candidates {:.1} of {} ({:.1} with a normal impulse); state fingerprint {print:016x}",
         1e3 * best / steps as f64,
         total as f64 / steps as f64,
         its[steps / 2],
         its[steps - 1],
         active as f64 / steps as f64,
         model.ncontact(),
+        loaded as f64 / steps as f64,
     );
 }

@@ -384,6 +384,9 @@ pub struct Workspace {
     pub(crate) frozen: Vec<Option<crate::contact::Frozen>>,
     /// Signed distance of each candidate at the current configuration.
     pub(crate) contact_phi_now: Vec<f64>,
+    /// Rate of change of each candidate's distance at its current witness points (m/s,
+    /// negative when approaching): the activation's estimate of the step's approach.
+    pub(crate) contact_rate_now: Vec<f64>,
     /// Impulse rows and no-slip measures of the step (current configuration, built on first
     /// use).
     pub(crate) contact_step: Vec<crate::contact::StepRows>,
@@ -517,6 +520,7 @@ impl Workspace {
     /// (iterate, residual, directions, matrix values), which every use writes before it reads.
     fn reset(&mut self, model: &Model) {
         self.contact_phi_now.fill(0.0);
+        self.contact_rate_now.fill(0.0);
         self.contact_step.fill(Default::default());
         self.frozen.fill(None);
         self.contact_phi.fill(0.0);
@@ -604,6 +608,7 @@ impl Workspace {
         }
         Workspace {
             contact_phi_now: vec![0.0; model.ncontact()],
+            contact_rate_now: vec![0.0; model.ncontact()],
             contact_step: vec![Default::default(); model.ncontact()],
             frozen: vec![None; model.ncontact()],
             contact_phi: vec![0.0; model.ncontact()],

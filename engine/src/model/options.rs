@@ -45,9 +45,10 @@ pub struct Options {
     /// loops (a planar four-bar in 3-D) solvable without changing the solution. Default 1e-12.
     pub regularization: f64,
     /// Contact activation margin (m). Each step, a candidate whose current signed distance
-    /// exceeds `activation_margin + h (2 u + h |g|)`, with `u` a bound on the approach speed of
-    /// its two witness points from the current velocities (`|v| + |ω| ρ` per body, `ρ` the
-    /// geom's reach from the body's centre of mass), takes no part in the solve: zero impulse, no
+    /// exceeds `activation_margin + h (2 u + h |g|)`, with `u` the rate at which its two witness
+    /// points approach along the contact normal at the current velocities (a failed solve
+    /// retries with `u` a bound on the speed of any point of one geom relative to the other's
+    /// body, `|v| + |ω| ρ`, `ρ` the geom's reach), takes no part in the solve: zero impulse, no
     /// interior-point variables, no factorisation work. After the solve, every inactive candidate
     /// is checked at the new configuration and the step is solved again with it active if its
     /// distance fell below `activation_margin / 4`, so no contact the step makes is missed.

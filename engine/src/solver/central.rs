@@ -98,7 +98,7 @@ fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepR
     let mut short_steps = 0;
     for it in 0..o.max_iter {
         let vio = evaluate(model, state, ws, false, kappa);
-        let centred = ipm::centred_norm(ws);
+        let centred = ipm::centred_norm(model, ws);
         report.residual = centred;
         if !(vio.r.is_finite() && vio.k.is_finite() && centred.is_finite()) {
             report.status = SolveStatus::NonFinite;
@@ -122,15 +122,14 @@ fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepR
             report.status = SolveStatus::NonFinite;
             break;
         }
-        let merit = ipm::norm2(&ws.residual);
+        let merit = super::newton::live_norm2(model, &ws.active, &ws.residual);
         // Newton direction Δ_n = -R⁻¹ r(w, κ), then the corrector -R⁻¹ (r + Δb_n ∘ Δc_n)
-        ws.delta_aff.copy_from_slice(&ws.residual);
-        ws.delta_aff.iter_mut().for_each(|d| *d = -*d);
+        ipm::load_residual(model, &ws.active, &ws.residual, &mut ws.delta_aff, -1.0);
         ws.matrix
             .solve_refined(p, &mut ws.delta_aff, ipm::REFINE_ROUNDS, ipm::REFINE_ENOUGH);
-        ws.delta.copy_from_slice(&ws.residual);
+        ipm::load_residual(model, &ws.active, &ws.residual, &mut ws.delta, 1.0);
         add_mehrotra_correction(model, &ws.active, &ws.nt, &ws.delta_aff, &mut ws.delta);
-        ipm::solve_negated(ws, p);
+        ipm::solve_negated(model, ws, p);
         let worst = Violation { r: centred, k: 0.0 };
         let mut taus = ipm::fractions_to_boundary(model, worst);
         if centred > NEAR {
@@ -172,14 +171,14 @@ fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepR
         };
         if accepted.is_none() || short_steps == STALL_COUNT {
             evaluate(model, state, ws, false, kappa);
-            report.residual = ipm::centred_norm(ws);
+            report.residual = ipm::centred_norm(model, ws);
             report.status = SolveStatus::LineSearchFailed;
             break;
         }
     }
     if report.status == SolveStatus::MaxIterations {
         evaluate(model, state, ws, false, kappa);
-        report.residual = ipm::centred_norm(ws);
+        report.residual = ipm::centred_norm(model, ws);
     }
     ws.nt_on = false;
     report

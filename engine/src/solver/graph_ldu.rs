@@ -417,8 +417,11 @@ pub struct BlockMatrix {
 /// active ones costs what the fifty do.
 #[derive(Clone, Debug, Default)]
 struct Live {
-    /// Elimination steps of the nodes not skipped (indices into the pattern's steps).
+    /// The nodes not skipped, in node order, and their elimination steps (indices into the
+    /// pattern's steps); rebuilt when `stale` after [`BlockMatrix::set_skipped`] changed a node.
+    nodes: Vec<usize>,
     steps: Vec<usize>,
+    stale: bool,
     /// Nonzero assembled blocks of their rows, `(row node, block index)`, row by row.
     blocks: Vec<(usize, usize)>,
     /// Their row ranges (adjacent nodes merged).
@@ -442,7 +445,9 @@ impl BlockMatrix {
             nz: vec![true; p.nblocks()],
             assembled_nz: vec![true; p.nblocks()],
             live: Box::new(Live {
+                nodes: (0..p.nnodes()).collect(),
                 steps: (0..p.steps.len()).collect(),
+                stale: false,
                 blocks: Vec::with_capacity(p.nblocks()),
                 rows: Vec::with_capacity(p.nnodes()),
                 update_rows: Vec::with_capacity(p.nnodes()),
@@ -463,9 +468,12 @@ impl BlockMatrix {
             return;
         }
         self.skip[node] = skipped;
+        self.live.stale = true;
         // the pattern is symmetric: the row's column nodes are the column's row nodes
         for idx in p.row_ptr[node]..p.row_ptr[node + 1] {
             let (j, off) = (p.cols[idx], p.vals[idx]);
+            // a skipped row is the identity's (`factor` visits only the live rows)
+            self.nz[idx] = !skipped || j == node;
             let len = p.dims[node] * p.dims[j];
             self.values[off..off + len].fill(0.0);
             if j == node && skipped {
@@ -479,6 +487,21 @@ impl BlockMatrix {
         }
     }
 
+    /// Rebuild the lists of live nodes and steps after [`Self::set_skipped`] changed a node.
+    fn refresh_live(&mut self, p: &BlockPattern) {
+        let live = &mut *self.live;
+        if !live.stale {
+            return;
+        }
+        live.nodes.clear();
+        live.nodes
+            .extend((0..p.nnodes()).filter(|&i| !self.skip[i]));
+        live.steps.clear();
+        let steps = (0..p.steps.len()).filter(|&k| !self.skip[p.steps[k].node]);
+        live.steps.extend(steps);
+        live.stale = false;
+    }
+
     /// Whether `node` is left out of the factorisation (see [`Self::set_skipped`]).
     pub fn is_skipped(&self, node: usize) -> bool {
         self.skip[node]
@@ -488,7 +511,8 @@ impl BlockMatrix {
     /// identity blocks of skipped nodes (see [`Self::set_skipped`]): with hundreds of inactive
     /// contact candidates, clearing their blocks every iteration cost more than the solve.
     pub fn zero(&mut self, p: &BlockPattern) {
-        for i in (0..p.nnodes()).filter(|&i| !self.skip[i]) {
+        self.refresh_live(p);
+        for &i in &self.live.nodes {
             for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
                 let j = p.cols[idx];
                 // a fill block holds values only if the last factorisation's updates wrote it
@@ -632,21 +656,21 @@ impl BlockMatrix {
     /// Returns `Err(node)` if the (Schur-complemented) diagonal block of `node` is singular
     /// or not finite; the values are then partially factored and must be reassembled.
     pub fn factor(&mut self, p: &BlockPattern) -> Result<(), usize> {
+        self.refresh_live(p);
         // keep the nonzero blocks of the nodes not skipped as assembled, for `solve_refined`
+        // (a skipped node's row keeps the identity's `nz` from `set_skipped`)
         let live = &mut *self.live;
         live.blocks.clear();
         live.rows.clear();
-        for i in 0..p.nnodes() {
-            if !self.skip[i] {
-                let rows = p.offsets[i]..p.offsets[i + 1];
-                match live.rows.last_mut() {
-                    Some(last) if last.end == rows.start => last.end = rows.end,
-                    _ => live.rows.push(rows),
-                }
+        for &i in &live.nodes {
+            let rows = p.offsets[i]..p.offsets[i + 1];
+            match live.rows.last_mut() {
+                Some(last) if last.end == rows.start => last.end = rows.end,
+                _ => live.rows.push(rows),
             }
             for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
                 let j = p.cols[idx];
-                if self.skip[i] || self.skip[j] || p.fill[idx] {
+                if self.skip[j] || p.fill[idx] {
                     // fill blocks are zero as assembled (see `Self::values`)
                     self.nz[idx] = i == j;
                     continue;
@@ -661,9 +685,6 @@ impl BlockMatrix {
                 }
             }
         }
-        live.steps.clear();
-        let steps = (0..p.steps.len()).filter(|&k| !self.skip[p.steps[k].node]);
-        live.steps.extend(steps);
         self.assembled_nz.copy_from_slice(&self.nz);
         for s in self.live.steps.iter().map(|&k| &p.steps[k]) {
             let dk = s.dim;

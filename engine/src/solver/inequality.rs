@@ -198,6 +198,17 @@ pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace
     );
     let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
     ws.contact_phi_now[c] = w.phi;
+    // φ̇ = n · (velocity of A's witness − velocity of B's witness), n from B to A
+    let point_velocity = |b: usize, pose: &Pose, p: &Vector3<f64>| {
+        if b == 0 {
+            return Vector3::zeros();
+        }
+        let (v, wb) = state.velocity(b);
+        v + (crate::math::quat::rotation(&pose.quat) * wb).cross(&(p - pose.pos))
+    };
+    ws.contact_rate_now[c] = w.normal.dot(
+        &(point_velocity(ga.body, &pa, &w.point_a) - point_velocity(gb.body, &pb, &w.point_b)),
+    );
     ws.contact_step[c] = StepRows::new(w, pa, pb);
 }
 
@@ -223,32 +234,51 @@ fn geom_reach(geom: &crate::contact::Geom) -> f64 {
     geom.pos.norm() + r
 }
 
-/// Choose the candidates that take part in this step (after [`prepare`]): those whose current
-/// distance is within `activation_margin + h (2 u + h |g|)`, `u` the largest speed of any
-/// point of one geom relative to the other's body ([`relative_speed`]) at the current
-/// velocities. Candidates between two bodies at rest relative to each other (the links of an
-/// arm carried by a moving base) stay inactive until the distance shrinks; a step that closes
-/// a gap faster than this estimate (an impulsive actuator or collision) is caught by
-/// [`missed_contacts`] and re-solved.
-pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace) {
+/// Add to the step the candidates within reach (after [`prepare`]): those whose current
+/// distance is within `activation_margin + h (2 u + h |g|)`, with the approach speed `u` as
+/// `reach` says. The step starts with [`Reach::Approach`], the rate at which the witness points
+/// close along the normal: measured 2026-12-02 (`step_bench`, seed 5, 300 steps), it keeps
+/// 11.6 of the A1's 1024 candidates active per step instead of 54.4 under [`Reach::Bound`]
+/// (1.3 of them carry an impulse), and the A1 step costs 39% fewer instructions. A step that
+/// closes a gap faster than this estimate (a swinging box corner, an impulsive actuator) is
+/// caught by [`missed_contacts`] and re-solved; a solve that fails is solved again with the
+/// candidates of [`Reach::Bound`], then with all of them.
+pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace, reach: Reach) {
     let margin = model.options.activation_margin;
-    if margin == f64::INFINITY {
+    if margin == f64::INFINITY || reach == Reach::All {
         ws.active.fill(true);
         return;
     }
     let h = model.options.timestep;
     let drift = h * h * model.options.gravity.norm();
     for (c, contact) in model.contacts.iter().enumerate() {
-        let speed = relative_speed(
-            state,
-            &model.geoms[contact.geom_a],
-            &model.geoms[contact.geom_b],
-        );
+        let speed = match reach {
+            Reach::All => unreachable!(),
+            Reach::Approach => (-ws.contact_rate_now[c]).max(0.0),
+            Reach::Bound => relative_speed(
+                state,
+                &model.geoms[contact.geom_a],
+                &model.geoms[contact.geom_b],
+            ),
+        };
         let reach = margin + 2.0 * h * speed + drift;
         // NaN distances or speeds stay active (the solve then reports them)
         let phi = ws.contact_phi_now[c];
-        ws.active[c] = phi.is_nan() || reach.is_nan() || phi <= reach;
+        ws.active[c] |= phi.is_nan() || reach.is_nan() || phi <= reach;
     }
+}
+
+/// How far ahead [`activate`] looks: the speed `u` in its reach `margin + h (2 u + h |g|)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Reach {
+    /// The rate at which the candidate's current witness points approach along its normal.
+    /// Two links swinging past each other, or a foot swinging above the floor, stay inactive.
+    Approach,
+    /// A bound on the speed of any point of one geom relative to the other's body
+    /// ([`relative_speed`]): covers every feature of the pair, at several times the cost.
+    Bound,
+    /// Every candidate.
+    All,
 }
 
 /// Bound on the speed of any point of one geom relative to the material of the other's body at
@@ -369,10 +399,9 @@ pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
 /// Add the inequality rows at the iterate `w` (with `ws.next_pose` set) and their impulses on
 /// the body rows. Complementarity rows hold `b ∘ c - κ e`. Returns (equality ∞-norm of these
 /// nodes, max |b ∘ c|). An inactive candidate's variables are frozen at the step's starting
-/// values `state.ineq_vars` (rows `x - x₀`, no impulse).
+/// values `state.ineq_vars` (no impulse); its rows are left as they are.
 pub(crate) fn evaluate(
     model: &Model,
-    state: &State,
     ws: &mut Workspace,
     w: &[f64],
     residual: &mut [f64],
@@ -386,16 +415,10 @@ pub(crate) fn evaluate(
             ws.next_pose[b]
         }
     };
-    let mut k = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
-        let dim = contact.model.dim();
-        k += dim;
         if !ws.active[c] {
-            // no impulse; the variables stay at their starting values (zero rows there)
-            let o = t.pattern.offset(t.contact_node[c]);
-            for i in 0..dim {
-                residual[o + i] = w[o + i] - state.ineq_vars[k - dim + i];
-            }
+            // no impulse; the variables stay at their start and their rows are not read
+            // (`newton::for_each_live_range`)
             continue;
         }
         let [a, b] = t.contact_bodies[c];

@@ -16,7 +16,10 @@
 use super::inequality::{
     add_mehrotra_correction, cone_search, mean_complementarity, scale_soc_rows, update_scalings,
 };
-use super::newton::{Violation, assemble, evaluate, evaluate_kept, recentre, spin_limited_step};
+use super::newton::{
+    Violation, assemble, evaluate, evaluate_kept, for_each_live_range, live_inf_norm, live_norm2,
+    recentre, spin_limited_step,
+};
 use crate::model::Model;
 use crate::state::{IterationRecord, SolveStatus, State, StepReport, Workspace};
 
@@ -72,11 +75,8 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
 }
 
 /// Largest entry of the centred residual `r(w, κ)` left in `ws.residual` by `evaluate`.
-pub(crate) fn centred_norm(ws: &Workspace) -> f64 {
-    ws.residual.iter().fold(
-        0.0f64,
-        |m, r| if r.is_nan() { f64::NAN } else { m.max(r.abs()) },
-    )
+pub(crate) fn centred_norm(model: &Model, ws: &Workspace) -> f64 {
+    live_inf_norm(model, &ws.active, &ws.residual)
 }
 
 /// The interior-point loop. `central = None` drives complementarity to `kappa_tol` (the hard
@@ -110,7 +110,7 @@ pub(crate) fn solve_to(
             None => vio.r < o.rtol && vio.k < o.kappa_tol,
             Some(k) => {
                 recentre(model, state, ws, k);
-                let c = centred_norm(ws);
+                let c = centred_norm(model, ws);
                 recentre(model, state, ws, 0.0);
                 c < o.rtol
             }
@@ -139,9 +139,7 @@ pub(crate) fn solve_to(
             break;
         }
         // predictor: Δ_aff = -R⁻¹ r(w, 0)  (ws.residual holds r(w, 0))
-        for (d, r) in ws.delta_aff.iter_mut().zip(&ws.residual) {
-            *d = -r;
-        }
+        load_residual(model, &ws.active, &ws.residual, &mut ws.delta_aff, -1.0);
         ws.matrix
             .solve_refined(p, &mut ws.delta_aff, REFINE_ROUNDS, REFINE_ENOUGH);
         let act = &ws.active;
@@ -164,10 +162,10 @@ pub(crate) fn solve_to(
         // corrector: Δ = -R⁻¹ (r(w, κ) + Δb_aff ∘ Δc_aff), reusing the factorisation
         recentre(model, state, ws, kappa);
         scale_soc_rows(model, ws, false, kappa);
-        let merit = norm2(&ws.residual);
-        ws.delta.copy_from_slice(&ws.residual);
+        let merit = live_norm2(model, &ws.active, &ws.residual);
+        load_residual(model, &ws.active, &ws.residual, &mut ws.delta, 1.0);
         add_mehrotra_correction(model, &ws.active, &ws.nt, &ws.delta_aff, &mut ws.delta);
-        solve_negated(ws, p);
+        solve_negated(model, ws, p);
         let taus = fractions_to_boundary(model, vio);
         let mut corrector = true;
         let accepted = match line_search(model, state, ws, kappa, merit, taus) {
@@ -178,8 +176,8 @@ pub(crate) fn solve_to(
                 corrector = false;
                 recentre(model, state, ws, kappa);
                 scale_soc_rows(model, ws, false, kappa);
-                ws.delta.copy_from_slice(&ws.residual);
-                solve_negated(ws, p);
+                load_residual(model, &ws.active, &ws.residual, &mut ws.delta, 1.0);
+                solve_negated(model, ws, p);
                 line_search(model, state, ws, kappa, merit, taus)
             }
         };
@@ -237,17 +235,40 @@ pub(crate) fn solve_to(
     report.complementarity = vio.k;
     if let Some(k) = central {
         evaluate(model, state, ws, false, k);
-        report.residual = centred_norm(ws);
+        report.residual = centred_norm(model, ws);
         report.complementarity = k;
     }
     report
 }
 
 /// `Δ ← -R⁻¹ Δ` with the current factorisation.
-pub(crate) fn solve_negated(ws: &mut Workspace, p: &crate::solver::graph_ldu::BlockPattern) {
-    ws.delta.iter_mut().for_each(|d| *d = -*d);
+pub(crate) fn solve_negated(
+    model: &Model,
+    ws: &mut Workspace,
+    p: &crate::solver::graph_ldu::BlockPattern,
+) {
+    let delta = &mut ws.delta;
+    for_each_live_range(model, &ws.active, |r| {
+        delta[r].iter_mut().for_each(|d| *d = -*d)
+    });
     ws.matrix
         .solve_refined(p, &mut ws.delta, REFINE_ROUNDS, REFINE_ENOUGH);
+}
+
+/// `dst = sign · residual` on the live rows: the rows of inactive candidates are neither
+/// solved for nor stepped along ([`line_search`]).
+pub(crate) fn load_residual(
+    model: &Model,
+    active: &[bool],
+    residual: &[f64],
+    dst: &mut [f64],
+    sign: f64,
+) {
+    for_each_live_range(model, active, |r| {
+        for (d, x) in dst[r.clone()].iter_mut().zip(&residual[r]) {
+            *d = sign * x;
+        }
+    });
 }
 
 /// Fractions to the boundary `(τ_ort, τ_soc)`: τ → 1 as the violations vanish (superlinear
@@ -263,10 +284,6 @@ pub(crate) fn fractions_to_boundary(model: &Model, vio: Violation) -> (f64, f64)
         o.tau_max.min(tau_ort)
     };
     (tau_ort, tau_soc)
-}
-
-pub(crate) fn norm2(x: &[f64]) -> f64 {
-    x.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
 /// 2-norm condition number of the assembled (not yet factored) Newton matrix, from a dense copy.
@@ -313,14 +330,22 @@ pub(crate) fn line_search(
         // an iterate on a cone's boundary (round-off): no step can help
         return None;
     }
+    // only the live rows move: an inactive candidate's variables stay at their start in `w`
+    // (its rows of `w_trial`, `delta` and the residual are never read during the solve)
     for _ in 0..=model.options.max_ls {
-        for i in 0..ws.w.len() {
-            ws.w_trial[i] = ws.w[i] + alpha * ws.delta[i];
-        }
+        let (w, trial, delta) = (&ws.w, &mut ws.w_trial, &ws.delta);
+        for_each_live_range(model, &ws.active, |r| {
+            for i in r {
+                trial[i] = w[i] + alpha * delta[i];
+            }
+        });
         evaluate_kept(model, state, ws, true, kappa);
         scale_soc_rows(model, ws, true, kappa);
-        if norm2(&ws.residual) <= (1.0 - 1e-4 * alpha) * merit {
-            std::mem::swap(&mut ws.w, &mut ws.w_trial);
+        if live_norm2(model, &ws.active, &ws.residual) <= (1.0 - 1e-4 * alpha) * merit {
+            let (w, trial) = (&mut ws.w, &ws.w_trial);
+            for_each_live_range(model, &ws.active, |r| {
+                w[r.clone()].copy_from_slice(&trial[r])
+            });
             return Some(alpha);
         }
         alpha *= 0.5;

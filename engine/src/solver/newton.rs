@@ -11,6 +11,7 @@
 //! domain): a too-fast spin ends as a reported failure, never a crash.
 use nalgebra::{Matrix3, Vector3};
 
+use super::inequality::Reach;
 use crate::integrator::variational::{momentum_residual, rot_jacobian};
 use crate::joints::Joint;
 use crate::joints::geometry::{JointFrame, Pose};
@@ -176,7 +177,8 @@ pub(crate) fn prepare(
         ws.w[model.topology.pattern.offset(n)] = 0.0;
     }
     if model.topology.has_cones {
-        super::inequality::activate(model, state, ws);
+        ws.active.fill(false);
+        super::inequality::activate(model, state, ws, Reach::Approach);
         super::inequality::initialize(model, state, ws, model.options.warm_start);
     }
 }
@@ -343,7 +345,11 @@ fn copy_live_rows(model: &Model, active: &[bool], src: &[f64], dst: &mut [f64]) 
 }
 
 /// The row ranges of everything but the inactive contact candidates.
-fn for_each_live_range(model: &Model, active: &[bool], mut f: impl FnMut(std::ops::Range<usize>)) {
+pub(crate) fn for_each_live_range(
+    model: &Model,
+    active: &[bool],
+    mut f: impl FnMut(std::ops::Range<usize>),
+) {
     let p = &model.topology.pattern;
     // layout: bodies, joints, couplings, limits | contacts | tendon limits
     let nodes = &model.topology.contact_node;
@@ -386,7 +392,7 @@ pub(crate) fn evaluate_in(
     smooth_rows(model, state, ws, w, residual);
     if model.topology.has_cones {
         // adds contact and limit impulses to the body rows, so measure the body rows after it
-        let (r, k) = super::inequality::evaluate(model, state, ws, w, residual, kappa);
+        let (r, k) = super::inequality::evaluate(model, ws, w, residual, kappa);
         let smooth = inf_norm(&residual[..model.topology.smooth_dim]);
         let r = if r.is_nan() || smooth.is_nan() {
             f64::NAN
@@ -483,6 +489,30 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
     if !model.couplings.is_empty() {
         super::coupling::add_rows(model, ws, w, residual);
     }
+}
+
+/// 2-norm of `x` over the live rows ([`for_each_live_range`]): the rows of inactive candidates
+/// are never evaluated during a solve.
+pub(crate) fn live_norm2(model: &Model, active: &[bool], x: &[f64]) -> f64 {
+    let mut sum = 0.0;
+    for_each_live_range(model, active, |r| {
+        sum += x[r].iter().map(|v| v * v).sum::<f64>();
+    });
+    sum.sqrt()
+}
+
+/// ∞-norm of `x` over the live rows, propagating NaN.
+pub(crate) fn live_inf_norm(model: &Model, active: &[bool], x: &[f64]) -> f64 {
+    let mut m = 0.0f64;
+    for_each_live_range(model, active, |r| {
+        let n = inf_norm(&x[r]);
+        m = if m.is_nan() || n.is_nan() {
+            f64::NAN
+        } else {
+            m.max(n)
+        };
+    });
+    m
 }
 
 /// ∞-norm that propagates NaN (`f64::max` alone would drop it).
@@ -664,16 +694,20 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     }
     let mut report = solve_active(model, state, ws, RETRIES);
     // Activation is a speed heuristic and must never cost a step: a solve that failed with
-    // some candidates left out is solved again with every candidate active. (Far candidates
+    // some candidates left out is solved again with the candidates any point of whose geoms
+    // could reach (`Reach::Bound`), then with every candidate active. (Far candidates
     // hold complementarity pairs that sit on the central path at every κ; with them the mean
     // complementarity, hence the centering, changes, and some stalled solves converge: random
     // scene 543 step 38 stalls at k = 1.3e-8 without them and converges in 13 iterations with.)
     // Warm, then one cold retry: the Panda's 835 candidates made the second cold retry cost
     // more than the rest of a run (`step_bench`, 8 × 300 steps: 16-18 → 14-15 ms/step, the same
     // unconverged steps; the stress suite unchanged; with no cold retry scene 613 fails).
-    if !report.status.is_success() && ws.active.iter().any(|a| !a) {
+    for wider in [Reach::Bound, Reach::All] {
+        if report.status.is_success() || ws.active.iter().all(|&a| a) {
+            break;
+        }
         let iterations = report.iterations;
-        ws.active.fill(true);
+        super::inequality::activate(model, state, ws, wider);
         ws.attempt += 1;
         restart_warm(model, state, ws);
         report = solve_active(model, state, ws, 1);
@@ -1206,7 +1240,10 @@ mod tests {
         assemble(&model, &mut ws);
         let base = ws.w.clone();
         let eps = 1e-6;
-        for col in 0..n {
+        // an inactive candidate's rows are neither evaluated nor factored
+        let mut live = vec![false; n];
+        for_each_live_range(&model, &ws.active, |r| live[r].fill(true));
+        for col in (0..n).filter(|&c| live[c]) {
             let mut x = vec![0.0; n];
             x[col] = 1.0;
             let mut ax = vec![0.0; n];
@@ -1217,7 +1254,7 @@ mod tests {
             let rp = ws.residual.clone();
             ws.w_trial[col] -= 2.0 * eps;
             evaluate(&model, &state, &mut ws, true, kappa);
-            for row in 0..n {
+            for row in (0..n).filter(|&r| live[r]) {
                 let fd = (rp[row] - ws.residual[row]) / (2.0 * eps);
                 let reg = if row == col && row >= 6 * (model.nbody() - 1) {
                     -model.options.regularization

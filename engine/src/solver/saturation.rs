@@ -37,7 +37,7 @@
 //! sliding at 1e-4 m/s. Only friction cones that are saturated and nearly still pay for the
 //! polish; the pyramid (`Linear`) model is not polished.
 use super::inequality::SOC;
-use super::ipm::{fractions_to_boundary, line_search, norm2, solve_negated};
+use super::ipm::{fractions_to_boundary, line_search, load_residual, solve_negated};
 use super::newton::{assemble, evaluate};
 use crate::contact::ContactModel;
 use crate::model::Model;
@@ -101,13 +101,13 @@ fn hold(model: &Model, state: &State, ws: &mut Workspace, slip_max: f64) -> (usi
         }
         iterations += 1;
         evaluate(model, state, ws, false, kappa);
-        let merit = norm2(&ws.residual);
-        ws.delta.copy_from_slice(&ws.residual);
+        let merit = super::newton::live_norm2(model, &ws.active, &ws.residual);
+        load_residual(model, &ws.active, &ws.residual, &mut ws.delta, 1.0);
         assemble(model, ws);
         if ws.matrix.factor(p).is_err() {
             break;
         }
-        solve_negated(ws, p);
+        solve_negated(model, ws, p);
         let accepted = line_search(
             model,
             state,
