@@ -92,12 +92,7 @@ fn main() {
         };
         // a plain step from the same state, for the gradient overhead
         let t0 = std::time::Instant::now();
-        let _ = step(
-            &model,
-            &mut state.clone(),
-            &mut Workspace::new(&model),
-            &ctrl,
-        );
+        let _ = step(&model, &mut state.clone(), &mut ws, &ctrl);
         plain += t0.elapsed().as_secs_f64();
         let t0 = std::time::Instant::now();
         let coloured_lin = lin(PartialsMethod::Coloured).and_then(|mut a| {

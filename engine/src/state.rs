@@ -48,6 +48,18 @@ impl State {
         h * self.interval.unwrap_or(1.0)
     }
 
+    /// Copy the motion of `other` (a state of the same model: time, poses, velocities and
+    /// their interval) into `self`, leaving the solver's warm start (impulses, interior-point
+    /// variables) as it is.
+    pub(crate) fn copy_motion_from(&mut self, other: &State) {
+        self.time = other.time;
+        self.com_pos.copy_from_slice(&other.com_pos);
+        self.quat.copy_from_slice(&other.quat);
+        self.com_linvel.copy_from_slice(&other.com_linvel);
+        self.angvel_b.copy_from_slice(&other.angvel_b);
+        self.interval = other.interval;
+    }
+
     /// Copy `other` (a state of the same model) into `self` without allocating.
     pub(crate) fn copy_from(&mut self, other: &State) {
         self.time = other.time;

@@ -570,26 +570,33 @@ impl SolveLinearization {
         let (ny, nz, nw) = (parts.y_z.nrows(), parts.y_z.ncols(), self.w.len());
         let mut full = parts.y_z.clone();
         let mut x = vec![0.0; nw];
+        // the solves write only the live rows (and the right-hand sides lie in them): zeroing
+        // those between solves keeps `x` zero elsewhere (a full fill was 8400 rows on the A1)
+        let rezero = |x: &mut [f64], m: &crate::solver::graph_ldu::BlockMatrix| {
+            m.live_rows().iter().for_each(|r| x[r.clone()].fill(0.0))
+        };
         if ny <= nz {
             for i in 0..ny {
-                x.fill(0.0);
-                for &k in &parts.w_cols {
-                    x[k] = parts.y_w[(i, k)];
+                for (kk, &k) in parts.w_cols.iter().enumerate() {
+                    x[k] = parts.y_w[(i, kk)];
                 }
                 self.ws.matrix.solve_transpose(p, &mut x);
                 for c in 0..nz {
                     full[(i, c)] -= parts.col_dot(c, &x);
                 }
+                rezero(&mut x, &self.ws.matrix);
             }
         } else {
             for c in 0..nz {
-                x.copy_from_slice(parts.r_z.column(c).as_slice());
+                x.fill(0.0);
+                parts.col_add_to(c, 1.0, &mut x);
                 self.ws.matrix.solve(p, &mut x);
                 for i in 0..ny {
                     full[(i, c)] -= parts
                         .w_cols
                         .iter()
-                        .map(|&k| parts.y_w[(i, k)] * x[k])
+                        .enumerate()
+                        .map(|(kk, &k)| parts.y_w[(i, kk)] * x[k])
                         .sum::<f64>();
                 }
             }
@@ -612,8 +619,8 @@ impl SolveLinearization {
         let parts = &self.parts;
         // λ = R_w⁻ᵀ ∂Y/∂wᵀ a;  adj = ∂Y/∂zᵀ a - ∂R/∂zᵀ λ
         let mut lam = vec![0.0; self.w.len()];
-        for &k in &parts.w_cols {
-            lam[k] = (0..ny).map(|i| parts.y_w[(i, k)] * adj_next[i]).sum();
+        for (kk, &k) in parts.w_cols.iter().enumerate() {
+            lam[k] = (0..ny).map(|i| parts.y_w[(i, kk)] * adj_next[i]).sum();
         }
         self.ws
             .matrix
@@ -651,20 +658,13 @@ impl SolveLinearization {
         let parts = &self.parts;
         let mut dw = vec![0.0; self.w.len()];
         for (c, tc) in t.iter().enumerate() {
-            for &(s, l) in &parts.rows[c] {
-                for (d, r) in dw[s..s + l]
-                    .iter_mut()
-                    .zip(&parts.r_z.column(c).as_slice()[s..s + l])
-                {
-                    *d += r * tc;
-                }
-            }
+            parts.col_add_to(c, *tc, &mut dw);
         }
         self.ws.matrix.solve(&model.topology.pattern, &mut dw);
         let mut out = &parts.y_z * &t;
-        for &k in &parts.w_cols {
+        for (kk, &k) in parts.w_cols.iter().enumerate() {
             for i in 0..out.len() {
-                out[i] -= parts.y_w[(i, k)] * dw[k];
+                out[i] -= parts.y_w[(i, kk)] * dw[k];
             }
         }
         Ok(out.iter().copied().collect())

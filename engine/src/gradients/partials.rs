@@ -43,35 +43,68 @@ pub(super) enum Input {
 
 /// The partial derivatives and where `∂R/∂z` can be non-zero.
 pub(super) struct Partials {
-    /// `∂R/∂z`, `nw × nz`.
-    pub r_z: DMatrix<f64>,
+    /// `∂R/∂z` on each column's support: column `c` holds the rows of `rows[c]`, range after
+    /// range, at `r_z[r_start[c]..r_start[c + 1]]` (a dense `nw × nz` matrix was mostly the
+    /// zero rows of inactive contact candidates: 8400 × 48 on the A1).
+    r_z: Vec<f64>,
+    r_start: Vec<usize>,
     /// `∂Y/∂z`, `ny × nz`.
     pub y_z: DMatrix<f64>,
-    /// `∂Y/∂w`, `ny × nw` (only body-velocity columns are non-zero, see `w_cols`).
+    /// `∂Y/∂w` on the columns `w_cols`, `ny × w_cols.len()` (the other columns are zero).
     pub y_w: DMatrix<f64>,
     /// Row ranges `(start, len)` of `w` where each column of `r_z` can be non-zero.
     pub rows: Vec<Vec<(usize, usize)>>,
-    /// Columns of `w` that `Y` depends on (the body velocities).
+    /// Columns of `w` that `Y` depends on (the body velocities, 6 per moving body).
     pub w_cols: Vec<usize>,
     /// Residual evaluations spent.
     pub evaluations: usize,
 }
 
 impl Partials {
+    /// Size `r_z` for the supports in `rows`, zero.
+    fn allocate_r_z(&mut self) {
+        self.r_start.clear();
+        let mut n = 0;
+        for rows in &self.rows {
+            self.r_start.push(n);
+            n += rows.iter().map(|&(_, l)| l).sum::<usize>();
+        }
+        self.r_start.push(n);
+        self.r_z.clear();
+        self.r_z.resize(n, 0.0);
+    }
+
+    /// Column `c` of `∂R/∂z` on its support, range after range (see `r_z`).
+    fn col(&self, c: usize) -> &[f64] {
+        &self.r_z[self.r_start[c]..self.r_start[c + 1]]
+    }
+
     /// `∂R/∂z[:, c] · v` over the column's support.
     pub fn col_dot(&self, c: usize, v: &[f64]) -> f64 {
-        let col = self.r_z.column(c);
-        let col = col.as_slice();
-        self.rows[c]
-            .iter()
-            .map(|&(s, l)| {
-                col[s..s + l]
-                    .iter()
-                    .zip(&v[s..s + l])
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>()
-            })
-            .sum()
+        let mut col = self.col(c);
+        let mut sum = 0.0;
+        for &(s, l) in &self.rows[c] {
+            let (head, rest) = col.split_at(l);
+            sum += head
+                .iter()
+                .zip(&v[s..s + l])
+                .map(|(a, b)| a * b)
+                .sum::<f64>();
+            col = rest;
+        }
+        sum
+    }
+
+    /// `dst += scale · ∂R/∂z[:, c]` (only the column's support is touched).
+    pub fn col_add_to(&self, c: usize, scale: f64, dst: &mut [f64]) {
+        let mut col = self.col(c);
+        for &(s, l) in &self.rows[c] {
+            let (head, rest) = col.split_at(l);
+            for (d, r) in dst[s..s + l].iter_mut().zip(head) {
+                *d += scale * r;
+            }
+            col = rest;
+        }
     }
 }
 
@@ -155,7 +188,8 @@ impl<'a> Probe<'a> {
     fn restore(&mut self, inputs: &[Input], cols: &[usize]) {
         for &c in cols {
             match inputs[c] {
-                Input::State(_) => self.state.clone_from(&self.point.state),
+                // a perturbation moves poses and velocities only
+                Input::State(_) => self.state.copy_motion_from(&self.point.state),
                 Input::Ctrl(i) => self.ctrl[i] = self.ctrl0[i],
                 Input::Param(p) => self.model.set_param(p, self.base.param(p)),
             }
@@ -313,10 +347,12 @@ pub(super) fn partials(
     let (nw, ny, nz) = (w.len(), point.coords.dim(model), inputs.len());
     let eps = steps(model, inputs);
     let mut probe = Probe::new(model, point, ctrl, active);
+    let nwc = 6 * (model.nbody() - 1);
     let mut out = Partials {
-        r_z: DMatrix::zeros(nw, nz),
+        r_z: Vec::new(),
+        r_start: Vec::new(),
         y_z: DMatrix::zeros(ny, nz),
-        y_w: DMatrix::zeros(ny, nw),
+        y_w: DMatrix::zeros(ny, nwc),
         rows: vec![vec![(0, nw)]; nz],
         w_cols: (1..model.nbody())
             .flat_map(|b| {
@@ -339,6 +375,7 @@ pub(super) fn partials(
             for (c, s) in sup.iter().enumerate() {
                 out.rows[c] = node_rows(model, &s.nodes);
             }
+            out.allocate_r_z();
             let groups = colour(&sup, model.topology.pattern.nnodes());
             // contacts and joints each group must refresh
             let refresh: Vec<Refresh> = groups
@@ -376,6 +413,7 @@ pub(super) fn partials(
             return Ok(out);
         }
     };
+    out.allocate_r_z();
     residual_columns(&mut probe, &mut out, inputs, &eps, w, &groups, None);
     output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, None);
     Ok(out)
@@ -412,15 +450,19 @@ fn residual_columns(
             out.evaluations += 1;
             probe.restore(inputs, group);
             if sign > 0.0 {
-                plus.copy_from_slice(&probe.residual);
+                for &(s, l) in group.iter().flat_map(|&c| &out.rows[c]) {
+                    plus[s..s + l].copy_from_slice(&probe.residual[s..s + l]);
+                }
             }
         }
         for &c in group {
             let inv = 1.0 / (2.0 * eps[c]);
+            let mut k = out.r_start[c];
             for &(s, l) in &out.rows[c] {
                 let (p, m) = (&plus[s..s + l], &probe.residual[s..s + l]);
-                for (i, (p, m)) in p.iter().zip(m).enumerate() {
-                    out.r_z[(s + i, c)] = (p - m) * inv;
+                for (p, m) in p.iter().zip(m) {
+                    out.r_z[k] = (p - m) * inv;
+                    k += 1;
                 }
             }
         }
@@ -545,8 +587,9 @@ fn output_partials(
             for &b in group {
                 let k = slot(b) + comp;
                 wp[k] = w[k];
+                // `w_cols` lists the moving bodies' six velocity rows in body order
                 for &i in &rows[b].nodes {
-                    out.y_w[(i, k)] = (yp[i] - ym[i]) / (2.0 * FD_STEP);
+                    out.y_w[(i, 6 * b + comp)] = (yp[i] - ym[i]) / (2.0 * FD_STEP);
                 }
             }
         }

@@ -502,6 +502,12 @@ impl BlockMatrix {
         live.stale = false;
     }
 
+    /// Row ranges of the nodes the last [`factor`](Self::factor) did not skip: the only rows
+    /// the solves read or write.
+    pub fn live_rows(&self) -> &[Range<usize>] {
+        &self.live.rows
+    }
+
     /// Whether `node` is left out of the factorisation (see [`Self::set_skipped`]).
     pub fn is_skipped(&self, node: usize) -> bool {
         self.skip[node]
