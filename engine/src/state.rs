@@ -521,7 +521,7 @@ impl Workspace {
             .flatten();
         match spare {
             Some(mut ws) => {
-                ws.reset(model);
+                ws.reset();
                 ws
             }
             None => Workspace::new(model),
@@ -530,7 +530,7 @@ impl Workspace {
 
     /// Back to the state of [`Workspace::new`] in everything but the large numeric buffers
     /// (iterate, residual, directions, matrix values), which every use writes before it reads.
-    fn reset(&mut self, model: &Model) {
+    fn reset(&mut self) {
         self.contact_phi_now.fill(0.0);
         self.contact_rate_now.fill(0.0);
         self.contact_step.fill(Default::default());
@@ -542,7 +542,7 @@ impl Workspace {
         self.saturated.fill(None);
         self.blocking.fill(false);
         self.applied.fill([0.0; 6]);
-        self.start = State::reference(model);
+        // (`start` is written by every step before it is read)
         self.dphi.fill(Matrix3::zeros());
         self.next_pose.fill(Pose::world());
         self.jac_now.fill(0.0);

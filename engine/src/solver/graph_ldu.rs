@@ -509,6 +509,7 @@ impl BlockMatrix {
     }
 
     /// Whether `node` is left out of the factorisation (see [`Self::set_skipped`]).
+    #[inline]
     pub fn is_skipped(&self, node: usize) -> bool {
         self.skip[node]
     }
