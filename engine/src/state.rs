@@ -399,6 +399,12 @@ pub struct Workspace {
     /// Rate of change of each candidate's distance at its current witness points (m/s,
     /// negative when approaching): the activation's estimate of the step's approach.
     pub(crate) contact_rate_now: Vec<f64>,
+    /// Whether each candidate's current-configuration data (`frozen`, `contact_phi_now`,
+    /// `contact_rate_now`, `contact_step`) were computed this step; a candidate out of any
+    /// activation's reach skips them (`inequality::prepare`) until it is activated.
+    pub(crate) prepared: Vec<bool>,
+    /// Each geom's bounding sphere and speed at the current configuration (`prepare`).
+    pub(crate) geom_bounds: Vec<crate::solver::inequality::GeomBound>,
     /// Impulse rows and no-slip measures of the step (current configuration, built on first
     /// use).
     pub(crate) contact_step: Vec<crate::contact::StepRows>,
@@ -533,6 +539,7 @@ impl Workspace {
     fn reset(&mut self) {
         self.contact_phi_now.fill(0.0);
         self.contact_rate_now.fill(0.0);
+        self.prepared.fill(false);
         self.contact_step.fill(Default::default());
         self.frozen.fill(None);
         self.contact_phi.fill(0.0);
@@ -621,6 +628,8 @@ impl Workspace {
         Workspace {
             contact_phi_now: vec![0.0; model.ncontact()],
             contact_rate_now: vec![0.0; model.ncontact()],
+            prepared: vec![false; model.ncontact()],
+            geom_bounds: vec![Default::default(); model.geoms.len()],
             contact_step: vec![Default::default(); model.ncontact()],
             frozen: vec![None; model.ncontact()],
             contact_phi: vec![0.0; model.ncontact()],

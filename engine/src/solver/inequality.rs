@@ -187,10 +187,110 @@ pub(crate) fn widen(model: &Model, ws: &mut Workspace, impulse: f64, slack: f64)
 /// Contact frames at the current configuration (impulse directions, tangential velocity map),
 /// and the features held fixed for the step (near-flat disk rim points, box corners' faces:
 /// [`crate::contact::freeze_for_step`]).
+///
+/// An inactive candidate whose geoms' bounding spheres are apart by more than the step could
+/// close at their speeds (`activation_margin + h (2 (u_a + u_b) + h |g|)`, `u` the fastest any
+/// point of a geom moves) skips the narrow phase: its distance is recorded as that lower bound,
+/// and its data are computed if it is activated ([`ensure_prepared`]). Measured 2026-12-02:
+/// the narrow phase of every candidate was 11% of an A1 step (1024 candidates).
 pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
-    for c in 0..model.ncontact() {
+    let margin = model.options.activation_margin;
+    let h = model.options.timestep;
+    let drift = h * h * model.options.gravity.norm();
+    for (g, geom) in model.geoms.iter().enumerate() {
+        ws.geom_bounds[g] = GeomBound::new(state, geom);
+    }
+    for (c, contact) in model.contacts.iter().enumerate() {
+        if !ws.active[c] && margin.is_finite() {
+            let (a, b) = (
+                &ws.geom_bounds[contact.geom_a],
+                &ws.geom_bounds[contact.geom_b],
+            );
+            let gap = a.gap(b);
+            if gap > margin + 2.0 * h * (a.speed + b.speed) + drift {
+                ws.prepared[c] = false;
+                ws.frozen[c] = None;
+                ws.contact_phi_now[c] = gap;
+                ws.contact_rate_now[c] = 0.0;
+                continue;
+            }
+        }
         prepare_candidate(model, state, ws, c);
     }
+}
+
+/// A geom's bounding sphere at the current configuration and the fastest any of its points
+/// moves (world frame). A plane is bounded by its half-space (`radius` infinite, `centre` a
+/// point of it, `normal` its outward normal) and is only bounded when on the world.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct GeomBound {
+    centre: Vector3<f64>,
+    normal: Vector3<f64>,
+    radius: f64,
+    speed: f64,
+}
+
+impl GeomBound {
+    fn new(state: &State, geom: &crate::contact::Geom) -> Self {
+        use crate::contact::geometry::Shape;
+        let pose = if geom.body == 0 {
+            Pose::world()
+        } else {
+            state.pose(geom.body)
+        };
+        let frame = geom.world_pose(&pose);
+        let radius = match geom.shape {
+            Shape::Plane => f64::INFINITY,
+            Shape::Sphere { radius } => radius,
+            Shape::Capsule {
+                radius,
+                half_length,
+            } => radius + half_length,
+            Shape::Box { half_extents } => half_extents.norm(),
+            Shape::Cylinder {
+                radius,
+                half_length,
+            } => radius.hypot(half_length),
+            Shape::Ellipsoid { radii } => radii.max(),
+            Shape::Point => 0.0,
+        };
+        let speed = if geom.body == 0 {
+            0.0
+        } else if radius.is_infinite() {
+            f64::INFINITY // a plane on a moving body: never bounded
+        } else {
+            let (v, w) = state.velocity(geom.body);
+            let w = crate::math::quat::rotation(&pose.quat) * w;
+            (v + w.cross(&(frame.pos - pose.pos))).norm() + w.norm() * radius
+        };
+        GeomBound {
+            centre: frame.pos,
+            normal: frame.rot.column(2).into_owned(),
+            radius,
+            speed,
+        }
+    }
+
+    /// A lower bound on the distance between the two geoms (−∞ when there is none).
+    fn gap(&self, other: &GeomBound) -> f64 {
+        match (self.radius.is_finite(), other.radius.is_finite()) {
+            (true, true) => (self.centre - other.centre).norm() - self.radius - other.radius,
+            (false, true) => self.normal.dot(&(other.centre - self.centre)) - other.radius,
+            (true, false) => other.gap(self),
+            (false, false) => f64::NEG_INFINITY,
+        }
+    }
+}
+
+/// [`prepare_candidate`] for every active candidate that [`prepare`] left out.
+pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) {
+    let active = std::mem::take(&mut ws.active);
+    for c in active_candidates(&active) {
+        if !ws.prepared[c] {
+            prepare_candidate(model, state, ws, c);
+        }
+    }
+    ws.active = active;
 }
 
 /// [`prepare`] for candidate `c` alone.
@@ -209,6 +309,7 @@ pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace
         ),
     );
     let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
+    ws.prepared[c] = true;
     ws.contact_phi_now[c] = w.phi;
     // φ̇ = n · (velocity of A's witness − velocity of B's witness), n from B to A
     let point_velocity = |b: usize, pose: &Pose, p: &Vector3<f64>| {

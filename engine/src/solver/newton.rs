@@ -153,6 +153,9 @@ pub(crate) fn prepare(
     ctrl: &[f64],
     forces: &AppliedForces,
 ) {
+    // the step's candidates are chosen below; until then none is active (so `prepare_forces`
+    // may leave out those far from any activation)
+    ws.active.fill(false);
     prepare_forces(model, state, ws, ctrl, forces);
     ws.attempt = 0;
     ws.saturated.fill(None);
@@ -177,7 +180,6 @@ pub(crate) fn prepare(
         ws.w[model.topology.pattern.offset(n)] = 0.0;
     }
     if model.topology.has_cones {
-        ws.active.fill(false);
         let _ = super::inequality::activate(model, state, ws, Reach::Approach);
         super::inequality::initialize(model, state, ws, model.options.warm_start);
     }
@@ -395,6 +397,10 @@ pub(crate) fn evaluate_in(
     kappa: f64,
 ) -> Violation {
     ws.kept.valid = false;
+    if model.topology.has_cones {
+        // candidates activated since `prepare` (a wider retry, a missed contact, a copied set)
+        super::inequality::ensure_prepared(model, state, ws);
+    }
     smooth_rows(model, state, ws, w, residual);
     if model.topology.has_cones {
         // adds contact and limit impulses to the body rows, so measure the body rows after it
