@@ -232,15 +232,29 @@ pub(crate) struct GeomBound {
 
 impl GeomBound {
     fn new(state: &State, geom: &crate::contact::Geom) -> Self {
-        use crate::contact::geometry::Shape;
         let pose = if geom.body == 0 {
             Pose::world()
         } else {
             state.pose(geom.body)
         };
-        let frame = geom.world_pose(&pose);
+        let mut bound = Self::at(geom, &pose);
+        if geom.body != 0 && bound.radius.is_finite() {
+            let (v, w) = state.velocity(geom.body);
+            let w = crate::math::quat::rotation(&pose.quat) * w;
+            bound.speed =
+                (v + w.cross(&(bound.centre - pose.pos))).norm() + w.norm() * bound.radius;
+        }
+        bound
+    }
+
+    /// The bounding sphere (or half-space) with the geom's body at `pose`, at rest. A plane on
+    /// a moving body bounds nothing (`radius` NaN): its half-space turns with the body.
+    fn at(geom: &crate::contact::Geom, pose: &Pose) -> Self {
+        use crate::contact::geometry::Shape;
+        let frame = geom.world_pose(pose);
         let radius = match geom.shape {
-            Shape::Plane => f64::INFINITY,
+            Shape::Plane if geom.body == 0 => f64::INFINITY,
+            Shape::Plane => f64::NAN,
             Shape::Sphere { radius } => radius,
             Shape::Capsule {
                 radius,
@@ -254,30 +268,26 @@ impl GeomBound {
             Shape::Ellipsoid { radii } => radii.max(),
             Shape::Point => 0.0,
         };
-        let speed = if geom.body == 0 {
-            0.0
-        } else if radius.is_infinite() {
-            f64::INFINITY // a plane on a moving body: never bounded
-        } else {
-            let (v, w) = state.velocity(geom.body);
-            let w = crate::math::quat::rotation(&pose.quat) * w;
-            (v + w.cross(&(frame.pos - pose.pos))).norm() + w.norm() * radius
-        };
         GeomBound {
             centre: frame.pos,
             normal: frame.rot.column(2).into_owned(),
             radius,
-            speed,
+            speed: 0.0,
         }
     }
 
     /// A lower bound on the distance between the two geoms (−∞ when there is none).
     fn gap(&self, other: &GeomBound) -> f64 {
-        match (self.radius.is_finite(), other.radius.is_finite()) {
-            (true, true) => (self.centre - other.centre).norm() - self.radius - other.radius,
-            (false, true) => self.normal.dot(&(other.centre - self.centre)) - other.radius,
-            (true, false) => other.gap(self),
-            (false, false) => f64::NEG_INFINITY,
+        let plane = |b: &GeomBound| b.radius == f64::INFINITY;
+        let sphere = |b: &GeomBound| b.radius.is_finite();
+        if sphere(self) && sphere(other) {
+            (self.centre - other.centre).norm() - self.radius - other.radius
+        } else if plane(self) && sphere(other) {
+            self.normal.dot(&(other.centre - self.centre)) - other.radius
+        } else if sphere(self) && plane(other) {
+            other.gap(self)
+        } else {
+            f64::NEG_INFINITY
         }
     }
 }
@@ -430,15 +440,22 @@ fn relative_speed(state: &State, ga: &crate::contact::Geom, gb: &crate::contact:
 pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
     let floor = 0.25 * model.options.activation_margin;
     let mut n = 0;
+    let next = std::mem::take(&mut ws.next_pose);
+    let pose = |x: usize| if x == 0 { Pose::world() } else { next[x] };
+    for (g, geom) in model.geoms.iter().enumerate() {
+        ws.geom_bounds[g] = GeomBound::at(geom, &pose(geom.body));
+    }
     for (c, contact) in model.contacts.iter().enumerate() {
         if ws.active[c] {
             continue;
         }
-        let next = &ws.next_pose;
-        let pose = |x: usize| if x == 0 { Pose::world() } else { next[x] };
-        // far apart by the geoms' bounds alone: no narrow phase (a frozen feature is measured
-        // against its own plane, which such a bound does not cover)
-        if ws.frozen[c].is_none() && distance_bound(model, contact, pose) > floor {
+        // far apart by the geoms' bounding spheres: no narrow phase (a frozen feature is
+        // measured against its own plane, which such a bound does not cover)
+        let (a, b) = (
+            &ws.geom_bounds[contact.geom_a],
+            &ws.geom_bounds[contact.geom_b],
+        );
+        if ws.frozen[c].is_none() && a.gap(b) > floor {
             continue;
         }
         let (wit, _, _) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
@@ -447,35 +464,8 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
             n += 1;
         }
     }
+    ws.next_pose = next;
     n
-}
-
-/// A lower bound on the distance between the two geoms of `contact` at the body poses `pose`
-/// (`-∞` where none is cheap): the distance between the bodies' centres of mass less the
-/// geoms' reaches ([`geom_reach`]), or for a plane the other body's centre's height above it
-/// less the other geom's reach.
-fn distance_bound(
-    model: &Model,
-    contact: &crate::contact::Contact,
-    pose: impl Fn(usize) -> Pose,
-) -> f64 {
-    use crate::contact::geometry::Shape;
-    let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
-    let (ra, rb) = (geom_reach(ga), geom_reach(gb));
-    if ra.is_finite() && rb.is_finite() {
-        return (pose(ga.body).pos - pose(gb.body).pos).norm() - ra - rb;
-    }
-    let (plane, other, reach) = if matches!(ga.shape, Shape::Plane) {
-        (ga, gb, rb)
-    } else {
-        (gb, ga, ra)
-    };
-    if !matches!(plane.shape, Shape::Plane) || !reach.is_finite() {
-        return f64::NEG_INFINITY;
-    }
-    let frame = plane.world_pose(&pose(plane.body));
-    let normal = frame.rot.column(2);
-    normal.dot(&(pose(other.body).pos - frame.pos)) - reach
 }
 
 /// Penetration (m) of the exact disk rim that a solve with frozen rim points may leave before
