@@ -1094,3 +1094,103 @@ pub(crate) fn store(model: &Model, state: &mut State, ws: &Workspace) {
         k += dim;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::geometry::Shape;
+    use crate::joints::JointKind;
+    use crate::model::{BodySpec, GeomSpec, JointSpec, ModelBuilder};
+
+    /// Deterministic SplitMix64, uniform in [-1, 1).
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        }
+    }
+
+    /// The floor and one free body per shape, each geom offset and turned in its body.
+    fn scene(shapes: &[Shape]) -> Model {
+        let mut b = ModelBuilder::new().geom(GeomSpec::new("floor", "world", Shape::Plane));
+        for (i, shape) in shapes.iter().enumerate() {
+            let name = format!("b{i}");
+            b = b
+                .body(BodySpec::new(&name, 1.0, [0.1; 3]))
+                .joint(JointSpec::new(
+                    &format!("j{i}"),
+                    JointKind::Floating,
+                    "world",
+                    &name,
+                ))
+                .geom(
+                    GeomSpec::new(&format!("g{i}"), &name, shape.clone())
+                        .pos([0.05, -0.1, 0.08])
+                        .quat([0.5, 0.5, -0.5, 0.5]),
+                );
+        }
+        b.compile().unwrap()
+    }
+
+    #[test]
+    fn bounding_spheres_never_exceed_the_distance() {
+        // every shape against the floor and the others it collides with, random poses: the
+        // bound that lets `prepare` and `missed_contacts` skip the narrow phase must be at most
+        // the signed distance (cylinders and ellipsoids collide with planes only)
+        let sphere = Shape::Sphere { radius: 0.1 };
+        let capsule = Shape::Capsule {
+            radius: 0.05,
+            half_length: 0.2,
+        };
+        let cuboid = Shape::Box {
+            half_extents: Vector3::new(0.1, 0.2, 0.05),
+        };
+        let cylinder = Shape::Cylinder {
+            radius: 0.1,
+            half_length: 0.15,
+        };
+        let ellipsoid = Shape::Ellipsoid {
+            radii: Vector3::new(0.1, 0.05, 0.2),
+        };
+        let scenes = [
+            vec![sphere, capsule, cuboid],
+            vec![cylinder],
+            vec![ellipsoid],
+        ];
+        let mut rng = Rng(7);
+        let mut informative = 0;
+        for shapes in &scenes {
+            let model = scene(shapes);
+            let mut state = crate::State::reference(&model);
+            for _ in 0..200 {
+                for body in 1..model.nbody() {
+                    let (w, x, y, z) = (rng.next(), rng.next(), rng.next(), rng.next());
+                    let quat = nalgebra::Quaternion::new(w, x, y, z).normalize();
+                    let pos = Vector3::new(rng.next(), rng.next(), 0.5 * rng.next() + 0.3) * 0.6;
+                    state.set_pose(body, &Pose { pos, quat });
+                }
+                let exact = crate::contact::signed_distances(&model, &state);
+                let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
+                for (c, contact) in model.contacts.iter().enumerate() {
+                    let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
+                    let a = GeomBound::at(ga, &pose(ga.body));
+                    let gap = a.gap(&GeomBound::at(gb, &pose(gb.body)));
+                    assert!(
+                        gap <= exact[c] + 1e-12,
+                        "candidate {c}: bound {gap} > distance {}",
+                        exact[c]
+                    );
+                    informative += usize::from(gap > 0.0);
+                }
+            }
+        }
+        assert!(
+            informative > 1000,
+            "a bound that never culls ({informative} positive)"
+        );
+    }
+}
