@@ -250,23 +250,10 @@ impl GeomBound {
     /// The bounding sphere (or half-space) with the geom's body at `pose`, at rest. A plane on
     /// a moving body bounds nothing (`radius` NaN): its half-space turns with the body.
     fn at(geom: &crate::contact::Geom, pose: &Pose) -> Self {
-        use crate::contact::geometry::Shape;
         let frame = geom.world_pose(pose);
-        let radius = match geom.shape {
-            Shape::Plane if geom.body == 0 => f64::INFINITY,
-            Shape::Plane => f64::NAN,
-            Shape::Sphere { radius } => radius,
-            Shape::Capsule {
-                radius,
-                half_length,
-            } => radius + half_length,
-            Shape::Box { half_extents } => half_extents.norm(),
-            Shape::Cylinder {
-                radius,
-                half_length,
-            } => radius.hypot(half_length),
-            Shape::Ellipsoid { radii } => radii.max(),
-            Shape::Point => 0.0,
+        let radius = match bounding_radius(&geom.shape) {
+            r if r.is_infinite() && geom.body != 0 => f64::NAN,
+            r => r,
         };
         GeomBound {
             centre: frame.pos,
@@ -338,8 +325,14 @@ pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace
 /// Largest distance (m) from a body's centre of mass to any point of `geom` (infinite for a
 /// plane on a moving body).
 fn geom_reach(geom: &crate::contact::Geom) -> f64 {
+    geom.pos.norm() + bounding_radius(&geom.shape)
+}
+
+/// Radius of the smallest sphere about a shape's frame origin that holds it (infinite for a
+/// plane).
+fn bounding_radius(shape: &crate::contact::geometry::Shape) -> f64 {
     use crate::contact::geometry::Shape;
-    let r = match geom.shape {
+    match *shape {
         Shape::Plane => f64::INFINITY,
         Shape::Sphere { radius } => radius,
         Shape::Capsule {
@@ -353,8 +346,7 @@ fn geom_reach(geom: &crate::contact::Geom) -> f64 {
         } => radius.hypot(half_length),
         Shape::Ellipsoid { radii } => radii.max(),
         Shape::Point => 0.0,
-    };
-    geom.pos.norm() + r
+    }
 }
 
 /// Add to the step the candidates within reach (after [`prepare`]): those whose current
@@ -1102,17 +1094,7 @@ mod tests {
     use crate::joints::JointKind;
     use crate::model::{BodySpec, GeomSpec, JointSpec, ModelBuilder};
 
-    /// Deterministic SplitMix64, uniform in [-1, 1).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-        }
-    }
+    use crate::solver::test_rng::Rng;
 
     /// The floor and one free body per shape, each geom offset and turned in its body.
     fn scene(shapes: &[Shape]) -> Model {

@@ -11,3 +11,5 @@ pub(crate) mod ipm;
 pub(crate) mod newton;
 pub(crate) mod saturation;
 pub(crate) mod tendon;
+#[cfg(test)]
+pub(crate) mod test_rng;
