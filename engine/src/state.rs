@@ -62,14 +62,9 @@ impl State {
 
     /// Copy `other` (a state of the same model) into `self` without allocating.
     pub(crate) fn copy_from(&mut self, other: &State) {
-        self.time = other.time;
-        self.com_pos.copy_from_slice(&other.com_pos);
-        self.quat.copy_from_slice(&other.quat);
-        self.com_linvel.copy_from_slice(&other.com_linvel);
-        self.angvel_b.copy_from_slice(&other.angvel_b);
+        self.copy_motion_from(other);
         self.joint_impulse.copy_from_slice(&other.joint_impulse);
         self.ineq_vars.copy_from_slice(&other.ineq_vars);
-        self.interval = other.interval;
         self.topology_id = other.topology_id;
     }
 

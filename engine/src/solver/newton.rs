@@ -360,16 +360,8 @@ pub(crate) fn for_each_live_range(
         return;
     };
     f(0..p.offset(first));
-    // most candidates are inactive (1000 of the A1's 1024): skip them sixteen at a time
-    const CHUNK: usize = 16;
-    for (k, flags) in active.chunks(CHUNK).enumerate() {
-        if !flags.contains(&true) {
-            continue;
-        }
-        for (i, _) in flags.iter().enumerate().filter(|(_, a)| **a) {
-            let n = nodes[k * CHUNK + i];
-            f(p.offset(n)..p.offset(n) + p.dim(n));
-        }
+    for n in super::inequality::active_candidates(active).map(|c| nodes[c]) {
+        f(p.offset(n)..p.offset(n) + p.dim(n));
     }
     f(p.offset(last) + p.dim(last)..p.total_dim());
 }
