@@ -377,9 +377,11 @@ pub struct Workspace {
     pub(crate) free_adr: Vec<usize>,
     /// Spring and applied generalized forces per joint free dof (current configuration).
     pub(crate) joint_tau: Vec<[f64; 6]>,
+    /// Coordinates of each joint at the current configuration (the actuators' lengths).
+    pub(crate) joint_q: Vec<[f64; 7]>,
     /// Joints whose current- and next-configuration terms are recomputed (empty: all). Set only
     /// by the gradients' partials, whose perturbations move a few bodies: the other joints'
-    /// `jac_now`, `free_jac` and `joint_tau` are kept from the unperturbed point, and their own
+    /// `jac_now`, `free_jac`, `joint_tau` and `joint_q` are kept from the unperturbed point, and their own
     /// rows and limit rows are left stale (they lie outside the perturbation's support).
     pub(crate) joint_filter: Vec<bool>,
     /// Scalar force of each actuator (current state and controls).
@@ -551,6 +553,7 @@ impl Workspace {
         self.jac_next.fill(0.0);
         self.free_jac.fill(0.0);
         self.joint_tau.fill([0.0; 6]);
+        self.joint_q.fill([0.0; 7]);
         self.joint_filter.clear();
         self.act_force.fill(0.0);
         self.coupling_slope.fill(0.0);
@@ -651,6 +654,7 @@ impl Workspace {
             free_jac: vec![0.0; nfree],
             free_adr,
             joint_tau: vec![[0.0; 6]; model.njoint()],
+            joint_q: vec![[0.0; 7]; model.njoint()],
             joint_filter: Vec::new(),
             act_force: vec![0.0; model.nu()],
             coupling_slope: vec![0.0; model.couplings.len()],

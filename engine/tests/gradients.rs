@@ -428,10 +428,14 @@ fn some_ctrl(model: &Model, k: usize) -> Vec<f64> {
         .collect()
 }
 
-#[test]
-fn coloured_partials_equal_column_by_column_on_a_humanoid() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models/humanoid.xml");
+/// Coloured against column-by-column partials on a shared robot, a few steps into varied
+/// controls from its first keyframe (or the reference pose). Each robot brings its own inputs:
+/// the humanoid's armature and springs, the Panda's position servos (forces that depend on the
+/// joint rate: light columns through the actuator bias), the X2's site thrusters, the A1's
+/// floating base on four contact feet.
+fn coloured_vs_reference_on(name: &str, kappas: &[Option<f64>]) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(format!("../../shared/models/{name}.xml"));
     if !path.exists() {
         eprintln!("skipped: {} not found", path.display());
         return;
@@ -440,10 +444,10 @@ fn coloured_partials_equal_column_by_column_on_a_humanoid() {
     let mut o = m.options.clone();
     o.timestep = 0.01;
     let m = m.with_options(o).unwrap();
-    // a generic moving state: squat keyframe, a few steps of varied controls
-    let key = &m.keyframes[0];
     let mut s = State::reference(&m);
-    ukemi_engine::set_minimal(&m, &mut s, &key.qpos, &key.qvel).unwrap();
+    if let Some(key) = m.keyframes.first() {
+        ukemi_engine::set_minimal(&m, &mut s, &key.qpos, &key.qvel).unwrap();
+    }
     let mut ws = Workspace::new(&m);
     for k in 0..3 {
         step(&m, &mut s, &mut ws, &some_ctrl(&m, k)).unwrap();
@@ -452,7 +456,21 @@ fn coloured_partials_equal_column_by_column_on_a_humanoid() {
     for coords in [Coordinates::Minimal, Coordinates::Maximal] {
         coloured_vs_reference(&m, &s, &u, coords, None);
     }
-    coloured_vs_reference(&m, &s, &u, Coordinates::Minimal, Some(1e-4));
+    for &kappa in kappas {
+        coloured_vs_reference(&m, &s, &u, Coordinates::Minimal, kappa);
+    }
+}
+
+#[test]
+fn coloured_partials_equal_column_by_column_on_a_humanoid() {
+    coloured_vs_reference_on("humanoid", &[Some(1e-4)]);
+}
+
+#[test]
+fn coloured_partials_equal_column_by_column_on_the_panda_x2_and_a1() {
+    for name in ["panda", "x2", "a1"] {
+        coloured_vs_reference_on(name, &[]);
+    }
 }
 
 #[test]

@@ -108,6 +108,32 @@ impl Partials {
     }
 }
 
+/// `jac_now`, `free_jac`, `joint_tau` and `joint_q` of a workspace.
+struct BaseJoints {
+    jac_now: Vec<f64>,
+    free_jac: Vec<f64>,
+    joint_tau: Vec<[f64; 6]>,
+    joint_q: Vec<[f64; 7]>,
+}
+
+impl BaseJoints {
+    fn of(ws: &Workspace) -> BaseJoints {
+        BaseJoints {
+            jac_now: ws.jac_now.clone(),
+            free_jac: ws.free_jac.clone(),
+            joint_tau: ws.joint_tau.clone(),
+            joint_q: ws.joint_q.clone(),
+        }
+    }
+
+    fn restore(&self, ws: &mut Workspace) {
+        ws.jac_now.copy_from_slice(&self.jac_now);
+        ws.free_jac.copy_from_slice(&self.free_jac);
+        ws.joint_tau.copy_from_slice(&self.joint_tau);
+        ws.joint_q.copy_from_slice(&self.joint_q);
+    }
+}
+
 /// Scratch for evaluating the residual and output map at perturbed inputs.
 struct Probe<'a> {
     base: &'a Model,
@@ -121,9 +147,9 @@ struct Probe<'a> {
     residual: Vec<f64>,
     scratch: Vec<f64>,
     dir: Vec<f64>,
-    /// `jac_now`, `free_jac` and `joint_tau` at the unperturbed inputs: a restricted residual
-    /// recomputes only the joints its perturbation touches (`Workspace::joint_filter`).
-    base_joints: (Vec<f64>, Vec<f64>, Vec<[f64; 6]>),
+    /// The joint terms at the unperturbed inputs: a restricted residual recomputes only the
+    /// joints its perturbation touches (`Workspace::joint_filter`).
+    base_joints: BaseJoints,
 }
 
 impl<'a> Probe<'a> {
@@ -138,11 +164,7 @@ impl<'a> Probe<'a> {
             ctrl,
             &AppliedForces::default(),
         );
-        let base_joints = (
-            ws.jac_now.clone(),
-            ws.free_jac.clone(),
-            ws.joint_tau.clone(),
-        );
+        let base_joints = BaseJoints::of(&ws);
         Probe {
             base_joints,
             base: model,
@@ -222,10 +244,7 @@ impl<'a> Probe<'a> {
         active: &[bool],
         joints: &[bool],
     ) {
-        let (jac, free, tau) = &self.base_joints;
-        self.ws.jac_now.copy_from_slice(jac);
-        self.ws.free_jac.copy_from_slice(free);
-        self.ws.joint_tau.copy_from_slice(tau);
+        self.base_joints.restore(&mut self.ws);
         self.ws.joint_filter.clear();
         self.ws.joint_filter.extend_from_slice(joints);
         let (model, state) = (&self.model, &self.state);
@@ -239,6 +258,20 @@ impl<'a> Probe<'a> {
             self.ws.active[c] = true;
         }
         newton::evaluate_in(model, state, &mut self.ws, w, &mut self.residual, 0.0);
+    }
+
+    /// The body rows that current velocities and controls reach (see `Light`), at `w` with the
+    /// probe's inputs: the applied forces (actuator rates and controls), the momenta and the
+    /// armature terms. Joint frames and contact geometry are those of the unperturbed poses.
+    fn residual_light(&mut self, w: &[f64]) {
+        self.base_joints.restore(&mut self.ws);
+        // (an empty filter would mean every joint: with no joints there is nothing to filter)
+        self.ws.joint_filter.clear();
+        self.ws.joint_filter.resize(self.model.njoint(), false);
+        let (model, state) = (&self.model, &self.state);
+        let forces = AppliedForces::default();
+        newton::prepare_smooth_forces(model, state, &mut self.ws, &self.ctrl, &forces);
+        newton::evaluate_smooth(model, state, &mut self.ws, w, &mut self.residual);
     }
 
     /// Output tangent (relative to `out_base`) of the next state from `w` with the probe's inputs.
@@ -281,11 +314,18 @@ fn steps(model: &Model, inputs: &[Input]) -> Vec<f64> {
         .collect()
 }
 
-/// Row supports of every input column.
-fn supports(model: &Model, probe: &mut Probe, inputs: &[Input], eps: &[f64]) -> Vec<Support> {
+/// Row supports of every input column, and whether the column is light: it changes current
+/// velocities or controls only, so its rows are body rows and the light residual evaluates it.
+fn supports(
+    model: &Model,
+    probe: &mut Probe,
+    inputs: &[Input],
+    eps: &[f64],
+) -> (Vec<Support>, Vec<bool>) {
     let graph = Interactions::new(model, &probe.ws.active.clone());
     let all: Vec<usize> = (1..model.nbody()).collect();
-    inputs
+    let mut light = vec![false; inputs.len()];
+    let sup = inputs
         .iter()
         .enumerate()
         .map(|(c, input)| match *input {
@@ -293,11 +333,16 @@ fn supports(model: &Model, probe: &mut Probe, inputs: &[Input], eps: &[f64]) -> 
                 probe.perturb(inputs, eps, &[c], 1.0);
                 let (touched, moved) = changed_bodies(model, &probe.point.state, &probe.state);
                 probe.restore(inputs, &[c]);
+                if moved.is_empty() {
+                    light[c] = true;
+                    return Support::body_rows(&graph, &touched);
+                }
                 Support::new(model, &graph, &touched, &moved, &[], &moved)
             }
             Input::Ctrl(i) => {
+                light[c] = true;
                 let bodies = transmission_bodies(model, &model.actuators[i].transmission);
-                Support::new(model, &graph, &bodies, &[], &[], &[])
+                Support::body_rows(&graph, &bodies)
             }
             Input::Param(p) => match p {
                 Param::Mass(b) | Param::Inertia(b, _, _) => {
@@ -315,7 +360,8 @@ fn supports(model: &Model, probe: &mut Probe, inputs: &[Input], eps: &[f64]) -> 
                 Param::Timestep => Support::everything(model),
             },
         })
-        .collect()
+        .collect();
+    (sup, light)
 }
 
 /// Row ranges of a sorted node list, adjacent ranges merged.
@@ -371,12 +417,23 @@ pub(super) fn partials(
     let groups: Vec<Vec<usize>> = match method {
         PartialsMethod::ColumnByColumn => (0..nz).map(|c| vec![c]).collect(),
         PartialsMethod::Coloured => {
-            let sup = supports(model, &mut probe, inputs, &eps);
+            let (sup, light) = supports(model, &mut probe, inputs, &eps);
             for (c, s) in sup.iter().enumerate() {
                 out.rows[c] = node_rows(model, &s.nodes);
             }
             out.allocate_r_z();
-            let groups = colour(&sup, model.topology.pattern.nnodes());
+            // light and full columns in separate groups: each group is evaluated one way
+            let nnodes = model.topology.pattern.nnodes();
+            let mut groups = Vec::new();
+            for kind in [false, true] {
+                let cols: Vec<usize> = (0..nz).filter(|&c| light[c] == kind).collect();
+                let sub: Vec<Support> = cols.iter().map(|&c| sup[c].clone()).collect();
+                groups.extend(
+                    colour(&sub, nnodes)
+                        .into_iter()
+                        .map(|g| g.into_iter().map(|k| cols[k]).collect::<Vec<usize>>()),
+                );
+            }
             // contacts and joints each group must refresh
             let refresh: Vec<Refresh> = groups
                 .iter()
@@ -397,6 +454,7 @@ pub(super) fn partials(
                     Refresh {
                         contacts: cs,
                         joints,
+                        light: light[g[0]],
                     }
                 })
                 .collect();
@@ -424,6 +482,8 @@ pub(super) fn partials(
 struct Refresh {
     contacts: Vec<usize>,
     joints: Vec<bool>,
+    /// Every column of the group is light (see [`supports`]): the light residual evaluates it.
+    light: bool,
 }
 
 /// `∂R/∂z` by central differences, one residual evaluation per group and sign; with
@@ -444,6 +504,7 @@ fn residual_columns(
         for sign in [1.0, -1.0] {
             probe.perturb(inputs, eps, group, sign);
             match refresh {
+                Some(r) if r[k].light => probe.residual_light(w),
                 Some(r) => probe.residual_restricted(w, &r[k].contacts, &active, &r[k].joints),
                 None => probe.residual_full(w),
             }

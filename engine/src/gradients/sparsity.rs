@@ -163,6 +163,25 @@ impl Support {
         }
     }
 
+    /// The support of an input that changes only the current velocities or the applied forces
+    /// of the bodies `touched` (a velocity, a control): the body rows of those bodies and their
+    /// neighbours (momenta, actuator rates, armature). Joint, limit and contact rows read poses
+    /// and `w` only, so they are not in it; such a column is evaluated by the partials' light
+    /// residual, which writes body rows alone.
+    pub fn body_rows(graph: &Interactions, touched: &[usize]) -> Support {
+        let mut nodes: Vec<usize> = touched
+            .iter()
+            .filter(|&&b| b > 0)
+            .flat_map(|&b| graph.nbrs[b].iter().filter_map(|&n| body_node(n)))
+            .collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        Support {
+            nodes,
+            ..Support::default()
+        }
+    }
+
     /// Every row and every contact candidate (inputs that change the whole step).
     pub fn everything(model: &Model) -> Support {
         Support {

@@ -7,16 +7,12 @@
 //! central-difference partials of the gradients reproduce.
 use nalgebra::Vector3;
 
-use crate::joints::geometry::{JointFrame, Pose};
 use crate::math::quat;
 use crate::model::{Model, Transmission};
 use crate::state::{State, Workspace};
 
-fn pose(state: &State, b: usize) -> Pose {
-    if b == 0 { Pose::world() } else { state.pose(b) }
-}
-
-/// Coordinate `dof` of joint `ji` and its rate (through the current free Jacobian).
+/// Coordinate `dof` of joint `ji` and its rate (through the current free Jacobian); both from
+/// `prepare_smooth_forces`'s pass over the joints (`ws.joint_q`, `ws.free_jac`).
 fn coordinate_and_rate(
     model: &Model,
     state: &State,
@@ -25,9 +21,6 @@ fn coordinate_and_rate(
     dof: usize,
 ) -> (f64, f64) {
     let joint = &model.joints[ji];
-    let frame = JointFrame::new(joint, &pose(state, joint.parent), &pose(state, joint.child));
-    let mut q = [0.0; 7];
-    frame.coordinates(joint, &mut q[..joint.nq()]);
     let row = &ws.free_jac[ws.free_adr[ji] + 12 * dof..ws.free_adr[ji] + 12 * dof + 12];
     let mut rate = 0.0;
     for (side, b) in [(0, joint.parent), (1, joint.child)] {
@@ -38,10 +31,11 @@ fn coordinate_and_rate(
             }
         }
     }
-    (q[dof], rate)
+    (ws.joint_q[ji][dof], rate)
 }
 
-/// Scalar force of every actuator into `ws.act_force` (needs `ws.free_jac` at the current state).
+/// Scalar force of every actuator into `ws.act_force` (needs `ws.free_jac` and `ws.joint_q` at
+/// the current state).
 pub(crate) fn actuator_forces(model: &Model, state: &State, ws: &mut Workspace, ctrl: &[f64]) {
     for (a, act) in model.actuators.iter().enumerate() {
         let u = match act.ctrlrange {

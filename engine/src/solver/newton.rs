@@ -106,7 +106,7 @@ pub(crate) fn prepare_smooth_forces(
         }
         ws.applied[b] = a;
     }
-    // Jacobians and spring forces first: actuator lengths and rates need every free Jacobian
+    // Jacobians, coordinates and spring forces first: actuator lengths and rates need them
     for (ji, joint) in model.joints.iter().enumerate() {
         if !joint_included(ws, ji) {
             continue;
@@ -117,6 +117,7 @@ pub(crate) fn prepare_smooth_forces(
         let nf = joint.nfree();
         let fa = ws.free_adr[ji];
         frame.free_jacobian(joint, &mut ws.free_jac[fa..fa + 12 * nf]);
+        frame.coordinates(joint, &mut ws.joint_q[ji][..joint.nq()]);
         let mut tau = [0.0; 6];
         generalized_force(model, ji, &frame, forces, &mut tau[..nf]);
         ws.joint_tau[ji] = tau;
@@ -410,6 +411,20 @@ pub(crate) fn evaluate_in(
             k: 0.0,
         }
     }
+}
+
+/// The body and joint rows alone (no contact or limit rows, no impulses of either on the body
+/// rows): what a change of the current velocities or the controls moves. The gradients'
+/// partials difference two of these at the same `w` and poses, where the left-out terms cancel.
+pub(crate) fn evaluate_smooth(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    w: &[f64],
+    residual: &mut [f64],
+) {
+    ws.kept.valid = false;
+    smooth_rows(model, state, ws, w, residual);
 }
 
 /// Whether joint `ji` passes the workspace's joint filter (see `Workspace::joint_filter`).
