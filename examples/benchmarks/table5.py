@@ -8,6 +8,7 @@ its reference figures) on the same MJCF file, in the same run, each timing the m
     .venv/bin/python examples/benchmarks/table5.py --steps 1000 --repeats 5   # the README's
     .venv/bin/python examples/benchmarks/table5.py --only shared/   # the four shared robots
     .venv/bin/python examples/benchmarks/table5.py --kappa-grad 1e-4   # smoothed gradients
+    .venv/bin/python examples/benchmarks/table5.py --tol 1e-6   # looser solver (Dojo.jl's rtol)
 
 Per-phase timings of the Jacobians (solve, central path, factorisation, partials,
 back-substitution): `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml`.
@@ -106,6 +107,9 @@ def main():
     ap.add_argument("--only", default="", help="run models whose name contains this")
     ap.add_argument("--kappa-grad", type=float, default=None,
                     help="central-path parameter of the gradients (default: exact, None)")
+    ap.add_argument("--tol", type=float, default=None,
+                    help="solver tolerance, rtol = kappa_tol = TOL (default: the model's, 1e-10 "
+                         "and 1e-11); what accuracy costs in time")
     args = ap.parse_args()
     kappa = args.kappa_grad
     mean = lambda f: [sum(x) / args.repeats for x in zip(*(f() for _ in range(args.repeats)))]
@@ -123,6 +127,8 @@ def main():
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 model = ukemi.Model.from_xml_path(str(path)).with_options(timestep=0.01)
+                if args.tol is not None:
+                    model = model.with_options(rtol=args.tol, kappa_tol=args.tol)
         except ukemi.UkemiError as e:
             print(f"{name:24s} skipped: {type(e).__name__}: {str(e)[:90]}")
             continue
