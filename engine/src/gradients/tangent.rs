@@ -10,7 +10,8 @@
 use nalgebra::Vector3;
 
 use crate::joints::coordinates::{
-    joint_qvel_into, pose_of, qpos_into, qvel_into, set_minimal, set_minimal_changed,
+    joint_qvel_in_frame, minimal_into, pose_of, qpos_into, qvel_into, set_minimal,
+    set_minimal_changed,
 };
 use crate::joints::geometry::JointFrame;
 use crate::math::quat;
@@ -206,10 +207,9 @@ impl Point {
             Coordinates::Minimal => {
                 let nv = model.nv;
                 let qpos = &mut scratch[..model.nq];
-                qpos_into(model, state, qpos);
                 let (dq, dv) = out.split_at_mut(nv);
+                minimal_into(model, state, qpos, dv);
                 difference_qpos(model, &self.qpos, qpos, dq);
-                qvel_into(model, state, dv);
                 for (d, v0) in dv.iter_mut().zip(&self.qvel) {
                     *d -= v0;
                 }
@@ -254,9 +254,10 @@ impl Point {
             let parent = pose_of(state, j.parent);
             let child = pose_of(state, j.child);
             let q1 = &mut scratch[qa..qa + nq];
-            JointFrame::new(j, &parent, &child).coordinates(j, q1);
+            let frame = JointFrame::new(j, &parent, &child);
+            frame.coordinates(j, q1);
             joint_difference(j, &self.qpos[qa..qa + nq], q1, &mut dq[va..va + nf]);
-            joint_qvel_into(state, j, &mut dv[va..va + nf]);
+            joint_qvel_in_frame(state, j, &frame, &mut dv[va..va + nf]);
             for (d, v0) in dv[va..va + nf].iter_mut().zip(&self.qvel[va..va + nf]) {
                 *d -= v0;
             }

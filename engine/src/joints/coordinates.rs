@@ -37,6 +37,20 @@ pub fn qpos_into(model: &Model, state: &State, out: &mut [f64]) {
     }
 }
 
+/// Write `qpos` and `qvel` of `state` (one joint frame per joint for both).
+pub(crate) fn minimal_into(model: &Model, state: &State, qpos: &mut [f64], qvel: &mut [f64]) {
+    for j in model.joints.iter().filter(|j| !j.is_loop) {
+        let frame = JointFrame::new(j, &pose_of(state, j.parent), &pose_of(state, j.child));
+        frame.coordinates(j, &mut qpos[j.qpos_adr..j.qpos_adr + j.nq()]);
+        joint_qvel_in_frame(
+            state,
+            j,
+            &frame,
+            &mut qvel[j.qvel_adr..j.qvel_adr + j.nfree()],
+        );
+    }
+}
+
 /// Write `qvel` (length `model.nv`) of `state`.
 pub fn qvel_into(model: &Model, state: &State, out: &mut [f64]) {
     for j in model.joints.iter().filter(|j| !j.is_loop) {
@@ -46,8 +60,18 @@ pub fn qvel_into(model: &Model, state: &State, out: &mut [f64]) {
 
 /// Write the `nfree` velocity coordinates of joint `j` in `state` (no allocation).
 pub(crate) fn joint_qvel_into(state: &State, j: &super::Joint, out: &mut [f64]) {
-    let mut jac = [0.0; 6 * 12];
     let frame = JointFrame::new(j, &pose_of(state, j.parent), &pose_of(state, j.child));
+    joint_qvel_in_frame(state, j, &frame, out);
+}
+
+/// [`joint_qvel_into`] with the joint's frame at `state` already built.
+pub(crate) fn joint_qvel_in_frame(
+    state: &State,
+    j: &super::Joint,
+    frame: &JointFrame,
+    out: &mut [f64],
+) {
+    let mut jac = [0.0; 6 * 12];
     let nf = j.nfree();
     frame.free_jacobian(j, &mut jac[..12 * nf]);
     let (vp, vc) = (velocity_of(state, j.parent), velocity_of(state, j.child));
