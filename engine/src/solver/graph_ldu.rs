@@ -514,6 +514,11 @@ impl BlockMatrix {
         self.skip[node]
     }
 
+    /// Whether every node in `nodes` is skipped.
+    pub fn all_skipped(&self, nodes: std::ops::Range<usize>) -> bool {
+        !self.skip[nodes].contains(&false)
+    }
+
     /// Set all values (including fill blocks) to zero, keeping the allocation, except the
     /// identity blocks of skipped nodes (see [`Self::set_skipped`]): with hundreds of inactive
     /// contact candidates, clearing their blocks every iteration cost more than the solve.

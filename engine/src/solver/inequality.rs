@@ -113,11 +113,20 @@ pub(crate) fn active_candidates(active: &[bool]) -> impl Iterator<Item = usize> 
     active
         .chunks(CHUNK)
         .enumerate()
-        .filter(|(_, flags)| flags.contains(&true))
+        .filter(|(_, flags)| any_set(flags))
         .flat_map(|(k, flags)| {
             let set = flags.iter().enumerate().filter(|(_, a)| **a);
             set.map(move |(i, _)| k * CHUNK + i)
         })
+}
+
+/// Whether any flag is set; a full chunk of sixteen is tested as one 128-bit word (the
+/// byte-by-byte scan of 1024 flags ran at every live-row loop of every iteration).
+fn any_set(flags: &[bool]) -> bool {
+    match <&[bool; 16]>::try_from(flags) {
+        Ok(chunk) => u128::from_ne_bytes(chunk.map(u8::from)) != 0,
+        Err(_) => flags.contains(&true),
+    }
 }
 
 fn v3(x: &[f64], i: usize) -> Vector3<f64> {
@@ -708,12 +717,9 @@ fn violations(
             };
         }
     };
-    for (c, contact) in model.contacts.iter().enumerate() {
-        if !active[c] {
-            continue;
-        }
+    for c in active_candidates(active) {
         let o = t.pattern.offset(t.contact_node[c]);
-        let rows: &[usize] = match contact.model {
+        let rows: &[usize] = match model.contacts[c].model {
             ContactModel::Impact => &[0],
             ContactModel::Nonlinear if saturated[c].is_some() => &[0, 2, 3, 4, 5, 6, 7],
             ContactModel::Nonlinear => &[0, 2, 6, 7],
@@ -738,8 +744,21 @@ fn violations(
 /// Newton-matrix blocks of the inequality nodes at the iterate `w`.
 pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
     let t = &model.topology;
+    const CHUNK: usize = 16;
+    let mut idle_until = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
         let n = t.contact_node[c];
+        // sixteen inactive candidates whose nodes are already skipped have nothing to do (the
+        // candidates' nodes are consecutive)
+        if c % CHUNK == 0 && c + CHUNK <= model.ncontact() {
+            let chunk = c..c + CHUNK;
+            if !any_set(&ws.active[chunk]) && ws.matrix.all_skipped(n..n + CHUNK) {
+                idle_until = c + CHUNK;
+            }
+        }
+        if c < idle_until {
+            continue;
+        }
         let active = ws.active[c];
         // frozen variables: `set_skipped` keeps the identity row and column of the node, so
         // the factorisation can skip it
@@ -991,12 +1010,14 @@ pub(crate) fn mean_complementarity(
 }
 
 /// Nesterov–Todd scalings of the active friction cones at the iterate `ws.w` (see
-/// [`NtScaling`]); a pair that is not strictly interior keeps unscaled rows.
+/// [`NtScaling`]); a pair that is not strictly interior keeps unscaled rows. (The inactive
+/// candidates' scalings stay `None`: every solve clears them all before its first iteration,
+/// and the activation does not change during a solve.)
 pub(crate) fn update_scalings(model: &Model, ws: &mut Workspace) {
     let t = &model.topology;
-    for (c, contact) in model.contacts.iter().enumerate() {
+    for c in active_candidates(&ws.active) {
         ws.nt[c] = None;
-        if ws.active[c] && contact.model == ContactModel::Nonlinear {
+        if model.contacts[c].model == ContactModel::Nonlinear {
             let o = t.pattern.offset(t.contact_node[c]);
             ws.nt[c] = NtScaling::new(&v3(&ws.w, o + SOC.0), &v3(&ws.w, o + SOC.1));
         }
@@ -1013,8 +1034,8 @@ pub(crate) fn scale_soc_rows(model: &Model, ws: &mut Workspace, trial: bool, kap
     }
     let t = &model.topology;
     let w = if trial { &ws.w_trial } else { &ws.w };
-    for (c, nt) in ws.nt.iter().enumerate() {
-        let Some(nt) = nt else { continue };
+    for c in active_candidates(&ws.active) {
+        let Some(nt) = &ws.nt[c] else { continue };
         let o = t.pattern.offset(t.contact_node[c]);
         let (xi, eta) = (nt.w * v3(w, o + SOC.0), nt.w_inv * v3(w, o + SOC.1));
         let r = soc_product(&xi, &eta);
@@ -1039,8 +1060,8 @@ pub(crate) fn add_mehrotra_correction(
         }
     });
     let t = &model.topology;
-    for (c, contact) in model.contacts.iter().enumerate() {
-        if !active[c] || contact.model != ContactModel::Nonlinear {
+    for c in active_candidates(active) {
+        if model.contacts[c].model != ContactModel::Nonlinear {
             continue;
         }
         let o = t.pattern.offset(t.contact_node[c]);
