@@ -381,8 +381,9 @@ pub struct Workspace {
     pub(crate) joint_q: Vec<[f64; 7]>,
     /// Joints whose current- and next-configuration terms are recomputed (empty: all). Set only
     /// by the gradients' partials, whose perturbations move a few bodies: the other joints'
-    /// `jac_now`, `free_jac`, `joint_tau` and `joint_q` are kept from the unperturbed point, and their own
-    /// rows and limit rows are left stale (they lie outside the perturbation's support).
+    /// `jac_now`, `free_jac`, `joint_tau` and `joint_q` are kept from the unperturbed point, and
+    /// their own rows and limit rows are left stale (they lie outside the perturbation's
+    /// support).
     pub(crate) joint_filter: Vec<bool>,
     /// Scalar force of each actuator (current state and controls).
     pub(crate) act_force: Vec<f64>,

@@ -109,7 +109,6 @@ pub(crate) fn for_each_owned_pair(
 /// Indices of the active candidates, skipping inactive ones sixteen at a time (most are: 1000
 /// of the A1's 1024).
 pub(crate) fn active_candidates(active: &[bool]) -> impl Iterator<Item = usize> + '_ {
-    const CHUNK: usize = 16;
     active
         .chunks(CHUNK)
         .enumerate()
@@ -120,10 +119,13 @@ pub(crate) fn active_candidates(active: &[bool]) -> impl Iterator<Item = usize> 
         })
 }
 
-/// Whether any flag is set; a full chunk of sixteen is tested as one 128-bit word (the
-/// byte-by-byte scan of 1024 flags ran at every live-row loop of every iteration).
+/// Activation flags tested at once by [`active_candidates`] and `assemble`.
+const CHUNK: usize = 16;
+
+/// Whether any flag is set; a full chunk is tested as one 128-bit word (the byte-by-byte scan
+/// of 1024 flags ran at every live-row loop of every iteration).
 fn any_set(flags: &[bool]) -> bool {
-    match <&[bool; 16]>::try_from(flags) {
+    match <&[bool; CHUNK]>::try_from(flags) {
         Ok(chunk) => u128::from_ne_bytes(chunk.map(u8::from)) != 0,
         Err(_) => flags.contains(&true),
     }
@@ -744,12 +746,11 @@ fn violations(
 /// Newton-matrix blocks of the inequality nodes at the iterate `w`.
 pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
     let t = &model.topology;
-    const CHUNK: usize = 16;
     let mut idle_until = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
         let n = t.contact_node[c];
-        // sixteen inactive candidates whose nodes are already skipped have nothing to do (the
-        // candidates' nodes are consecutive)
+        // a chunk of inactive candidates whose nodes are already skipped has nothing to do
+        // (the candidates' nodes are consecutive)
         if c % CHUNK == 0 && c + CHUNK <= model.ncontact() {
             let chunk = c..c + CHUNK;
             if !any_set(&ws.active[chunk]) && ws.matrix.all_skipped(n..n + CHUNK) {
