@@ -4,6 +4,7 @@
 //! Prints the steps before STEP that took over 100 iterations, then one line per iteration of
 //! STEP (attempt, residual, complementarity, μ, affine and accepted step lengths, whether the
 //! corrected direction was taken). Attempts restart per sub-step of a subdivided step.
+//! `UKEMI_TRACE_MAX_ITER=N` solves the traced step (only) with an iteration budget of N.
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{Workspace, mjcf, step};
 
@@ -28,7 +29,18 @@ fn main() {
     for k in 0..=which {
         let ctrl = controls.next(&model);
         ws.set_trace(k == which, false);
-        let r = step(&model, &mut state, &mut ws, &ctrl).unwrap();
+        // UKEMI_TRACE_MAX_ITER: another iteration budget for the traced step only
+        let long = std::env::var("UKEMI_TRACE_MAX_ITER").ok().map(|n| {
+            let mut o = model.options.clone();
+            o.max_iter = n.parse().unwrap();
+            model.with_options(o).unwrap()
+        });
+        let m = if k == which {
+            long.as_ref().unwrap_or(&model)
+        } else {
+            &model
+        };
+        let r = step(m, &mut state, &mut ws, &ctrl).unwrap();
         if k < which && r.iterations > 100 {
             println!(
                 "step {k}: {} iterations, {} sub-steps",
