@@ -421,6 +421,9 @@ struct Live {
     /// pattern's steps); rebuilt when `stale` after [`BlockMatrix::set_skipped`] changed a node.
     nodes: Vec<usize>,
     steps: Vec<usize>,
+    /// The blocks between two nodes not skipped, `(row node, block index)`: the ones
+    /// [`BlockMatrix::zero`] clears.
+    zero_blocks: Vec<(usize, usize)>,
     stale: bool,
     /// Nonzero assembled blocks of their rows, `(row node, block index)`, row by row.
     blocks: Vec<(usize, usize)>,
@@ -447,6 +450,9 @@ impl BlockMatrix {
             live: Box::new(Live {
                 nodes: (0..p.nnodes()).collect(),
                 steps: (0..p.steps.len()).collect(),
+                zero_blocks: (0..p.nnodes())
+                    .flat_map(|i| (p.row_ptr[i]..p.row_ptr[i + 1]).map(move |idx| (i, idx)))
+                    .collect(),
                 stale: false,
                 blocks: Vec::with_capacity(p.nblocks()),
                 rows: Vec::with_capacity(p.nnodes()),
@@ -499,6 +505,14 @@ impl BlockMatrix {
         live.steps.clear();
         let steps = (0..p.steps.len()).filter(|&k| !self.skip[p.steps[k].node]);
         live.steps.extend(steps);
+        live.zero_blocks.clear();
+        for &i in &live.nodes {
+            let row = p.row_ptr[i]..p.row_ptr[i + 1];
+            live.zero_blocks.extend(
+                row.filter(|&idx| !self.skip[p.cols[idx]])
+                    .map(|idx| (i, idx)),
+            );
+        }
         live.stale = false;
     }
 
@@ -524,14 +538,13 @@ impl BlockMatrix {
     /// contact candidates, clearing their blocks every iteration cost more than the solve.
     pub fn zero(&mut self, p: &BlockPattern) {
         self.refresh_live(p);
-        for &i in &self.live.nodes {
-            for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
-                let j = p.cols[idx];
-                // a fill block holds values only if the last factorisation's updates wrote it
-                if !self.skip[j] && (!p.fill[idx] || self.nz[idx]) {
-                    let len = p.dims[i] * p.dims[j];
-                    self.values[p.vals[idx]..p.vals[idx] + len].fill(0.0);
-                }
+        // (a list of the live blocks: scanning each live row's blocks for live columns cost
+        // as much as clearing them, the A1's body rows holding hundreds of candidates)
+        for &(i, idx) in &self.live.zero_blocks {
+            // a fill block holds values only if the last factorisation's updates wrote it
+            if !p.fill[idx] || self.nz[idx] {
+                let len = p.dims[i] * p.dims[p.cols[idx]];
+                self.values[p.vals[idx]..p.vals[idx] + len].fill(0.0);
             }
         }
     }
