@@ -4,7 +4,8 @@
 //! Prints the steps before STEP that took over 100 iterations, then one line per iteration of
 //! STEP (attempt, residual, complementarity, μ, affine and accepted step lengths, whether the
 //! corrected direction was taken). Attempts restart per sub-step of a subdivided step.
-//! `UKEMI_TRACE_MAX_ITER=N` solves the traced step (only) with an iteration budget of N.
+//! `UKEMI_TRACE_MAX_ITER=N` solves the traced step (only) with an iteration budget of N, and
+//! `UKEMI_TRACE_CTRL=u1,u2,...` with those controls.
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{Workspace, mjcf, step};
 
@@ -26,8 +27,15 @@ fn main() {
         Some(s) => workload::Controls::with_seed(s.parse().unwrap()),
         None => workload::Controls::new(),
     };
+    // UKEMI_TRACE_CTRL=u1,u2,...: these controls for the traced step instead
+    let given: Option<Vec<f64>> = std::env::var("UKEMI_TRACE_CTRL")
+        .ok()
+        .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect());
     for k in 0..=which {
-        let ctrl = controls.next(&model);
+        let mut ctrl = controls.next(&model);
+        if let (true, Some(u)) = (k == which, &given) {
+            ctrl.clone_from(u);
+        }
         ws.set_trace(k == which, false);
         // UKEMI_TRACE_MAX_ITER: another iteration budget for the traced step only
         let long = std::env::var("UKEMI_TRACE_MAX_ITER").ok().map(|n| {
