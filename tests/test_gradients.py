@@ -175,7 +175,7 @@ def test_box_push_gradient_is_smoothed_by_kappa():
 def test_gradient_at_failed_step_raises_convergence_error():
     m = box_on_floor()
     s = settle(m)
-    bad = m.with_options(max_iter=1)
+    bad = m.with_options(max_iter=1, endgame_iter=0)
     with pytest.raises(ukemi.ConvergenceError, match="did not converge"):
         ukemi.step_jacobians(bad, s, [30.0], kappa_grad=1e-4)
 

@@ -204,7 +204,7 @@ def test_check_grads_step_and_rollout():
 # --------------------------------------------------------------------------------- errors
 def stuck_ball():
     """A ball pressed into the floor, solved with one interior-point iteration."""
-    m = ball_on_floor().with_options(max_iter=1)
+    m = ball_on_floor().with_options(max_iter=1, endgame_iter=0)
     x = np.concatenate([m.make_state().qpos, [0.5, 0.0, -2.0, 0, 0, 0]])
     x[2] = 0.09
     return m, jnp.asarray(x), jnp.asarray([0.4])
@@ -269,7 +269,7 @@ def test_step_with_status_reports_failures_as_an_output_under_jit():
     """Non-convergence as data: the status output flags the failed batch element, the others
     are the normal steps, and gradients of converged elements flow."""
     m = ball_on_floor()
-    bad = m.with_options(max_iter=1)
+    bad = m.with_options(max_iter=1, endgame_iter=0)
     x_ok = sliding_ball_state(m)
     x_hit = np.concatenate([m.make_state().qpos, [0.0, 0.0, -3.0, 0, 0, 0]])
     xs = jnp.asarray(np.stack([x_ok, x_hit]))

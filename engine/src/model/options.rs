@@ -11,8 +11,14 @@ pub struct Options {
     /// Residual tolerance: the solve has converged when the ∞-norm of every residual row
     /// (momentum rows in N·s, constraint rows in m or quaternion units) is below it. Default 1e-10.
     pub rtol: f64,
-    /// Maximum Newton / interior-point iterations per step. Default 50 (Dojo.jl's default).
+    /// Maximum Newton / interior-point iterations per step (per solve attempt). Default 50
+    /// (Dojo.jl's default).
     pub max_iter: usize,
+    /// Extra interior-point iterations, beyond `max_iter`, for an attempt whose equality
+    /// residual is below 1e-4 when it reaches `max_iter`: its complementarity endgame, where a
+    /// stall often ends by itself, while a failed attempt costs the retries and subdivisions
+    /// (see `solver::ipm::ENDGAME_RESIDUAL`). Default 150; 0 makes `max_iter` a hard cap.
+    pub endgame_iter: usize,
     /// Maximum backtracking halvings per Newton iteration. Default 10.
     pub max_ls: usize,
     /// Complementarity (κ) tolerance of the interior-point solve: converged when every pair's
@@ -110,6 +116,7 @@ impl Default for Options {
             gravity: Vector3::new(0.0, 0.0, -9.81),
             rtol: 1e-10,
             max_iter: 50,
+            endgame_iter: 150,
             max_ls: 10,
             regularization: 1e-12,
             kappa_tol: 1e-11,
