@@ -254,6 +254,7 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     for (g, geom) in model.geoms.iter().enumerate() {
         ws.geom_bounds[g] = GeomBound::new(state, geom);
     }
+    let mut memo = crate::contact::BoxPairMemo::default();
     for (c, contact) in model.contacts.iter().enumerate() {
         if !ws.active[c] && margin.is_finite() {
             let (a, b) = (
@@ -269,7 +270,7 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
                 continue;
             }
         }
-        prepare_candidate(model, state, ws, c);
+        prepare_candidate_with(model, state, ws, c, &mut memo);
     }
 }
 
@@ -336,9 +337,10 @@ impl GeomBound {
 /// [`prepare_candidate`] for every active candidate that [`prepare`] left out.
 pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) {
     let active = std::mem::take(&mut ws.active);
+    let mut memo = crate::contact::BoxPairMemo::default();
     for c in active_candidates(&active) {
         if !ws.prepared[c] {
-            prepare_candidate(model, state, ws, c);
+            prepare_candidate_with(model, state, ws, c, &mut memo);
         }
     }
     ws.active = active;
@@ -346,11 +348,23 @@ pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) 
 
 /// [`prepare`] for candidate `c` alone.
 pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace, c: usize) {
+    prepare_candidate_with(model, state, ws, c, &mut Default::default());
+}
+
+/// [`prepare_candidate`] within a pass over the candidates at `state` (`memo`: see
+/// [`crate::contact::BoxPairMemo`]).
+fn prepare_candidate_with(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    c: usize,
+    memo: &mut crate::contact::BoxPairMemo,
+) {
     let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
     let h = model.options.timestep;
     let contact = &model.contacts[c];
     let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
-    ws.frozen[c] = crate::contact::freeze_for_step(
+    ws.frozen[c] = crate::contact::freeze_for_step_with(
         contact,
         &model.geoms,
         (&pose(ga.body), &pose(gb.body)),
@@ -358,6 +372,7 @@ pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace
             &predicted_pose(state, ga.body, h),
             &predicted_pose(state, gb.body, h),
         ),
+        memo,
     );
     let (w, pa, pb) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
     ws.prepared[c] = true;
