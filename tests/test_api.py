@@ -119,6 +119,15 @@ def test_with_options_returns_new_model(pend):
     assert s.time == pytest.approx(0.002)
 
 
+def test_iteration_counts_reject_negative_values_by_name(pend):
+    # a negative count is a named ValueError (not pyo3's OverflowError); the model is unchanged
+    for name in ("max_iter", "endgame_iter", "max_ls", "max_subdivisions"):
+        with pytest.raises(ValueError, match=name):
+            pend.with_options(**{name: -1})
+        assert pend.options[name] > 0
+    assert pend.with_options(endgame_iter=0).options["endgame_iter"] == 0
+
+
 def test_warm_start_margin_is_an_option_and_validated(pend):
     # a resting sphere warm-started with any margin stays at rest (the margin changes only the
     # interior-point start); bad margins name the field

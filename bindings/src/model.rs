@@ -520,9 +520,9 @@ impl PyModel {
         kappa_tol: Option<f64>,
         acceptable_rtol: Option<f64>,
         acceptable_kappa_tol: Option<f64>,
-        max_iter: Option<usize>,
-        endgame_iter: Option<usize>,
-        max_ls: Option<usize>,
+        max_iter: Option<i64>,
+        endgame_iter: Option<i64>,
+        max_ls: Option<i64>,
         undercut: Option<f64>,
         warm_start: Option<bool>,
         warm_start_margin: Option<f64>,
@@ -531,18 +531,29 @@ impl PyModel {
         activation_margin: Option<f64>,
         nt_scaling: Option<bool>,
         central_warm_start: Option<bool>,
-        max_subdivisions: Option<u32>,
+        max_subdivisions: Option<i64>,
         energy_guard: Option<f64>,
         max_step_rotation: Option<f64>,
     ) -> PyResult<PyModel> {
         guard(|| {
+            // counts arrive as Python ints: one out of range is a named error, not an
+            // OverflowError
+            fn count<T: TryFrom<i64>>(name: &str, v: Option<i64>, now: T) -> PyResult<T> {
+                v.map_or(Ok(now), |v| {
+                    T::try_from(v)
+                        .map_err(|_| {
+                            ukemi_engine::Error::model(name, v, "must be >= 0 and in range")
+                        })
+                        .py()
+                })
+            }
             let mut o = self.inner.options.clone();
             o.timestep = timestep.unwrap_or(o.timestep);
             o.gravity = gravity.map(Vector3::from).unwrap_or(o.gravity);
             o.rtol = rtol.unwrap_or(o.rtol);
-            o.max_iter = max_iter.unwrap_or(o.max_iter);
-            o.endgame_iter = endgame_iter.unwrap_or(o.endgame_iter);
-            o.max_ls = max_ls.unwrap_or(o.max_ls);
+            o.max_iter = count("max_iter", max_iter, o.max_iter)?;
+            o.endgame_iter = count("endgame_iter", endgame_iter, o.endgame_iter)?;
+            o.max_ls = count("max_ls", max_ls, o.max_ls)?;
             o.regularization = regularization.unwrap_or(o.regularization);
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);
             o.acceptable_rtol = acceptable_rtol.unwrap_or(o.acceptable_rtol);
@@ -552,7 +563,7 @@ impl PyModel {
             o.warm_start_margin = warm_start_margin.unwrap_or(o.warm_start_margin);
             o.nt_scaling = nt_scaling.unwrap_or(o.nt_scaling);
             o.central_warm_start = central_warm_start.unwrap_or(o.central_warm_start);
-            o.max_subdivisions = max_subdivisions.unwrap_or(o.max_subdivisions);
+            o.max_subdivisions = count("max_subdivisions", max_subdivisions, o.max_subdivisions)?;
             o.energy_guard = energy_guard.unwrap_or(o.energy_guard);
             // max_step_rotation = inf turns the rotation limit off
             o.max_step_rotation = max_step_rotation.unwrap_or(o.max_step_rotation);
