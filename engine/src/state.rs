@@ -414,6 +414,9 @@ pub struct Workspace {
     /// `∂θ/∂(δx⁺)` of each limited dof at the trial next configuration.
     pub(crate) limit_dtheta: Vec<[f64; 12]>,
     pub(crate) delta_aff: Vec<f64>,
+    /// The right-hand sides of the Jacobians' transposed solves, `rows × outputs` row-major;
+    /// zero between uses (a use clears the rows it wrote), so it is sized once per workspace.
+    pub(crate) jacobian_rhs: Vec<f64>,
     /// Whether each contact candidate takes part in the current step (see
     /// [`crate::Options::activation_margin`]); inactive ones carry no impulse and no solver work.
     pub(crate) active: Vec<bool>,
@@ -637,6 +640,7 @@ impl Workspace {
             limit_adr,
             limit_dtheta: vec![[0.0; 12]; nlim],
             delta_aff: vec![0.0; n],
+            jacobian_rhs: Vec::new(),
             active: vec![true; model.ncontact()],
             saturated: vec![None; model.ncontact()],
             blocking: vec![false; model.ncontact() + model.joints.len()],

@@ -257,6 +257,9 @@ struct Solved {
     report: StepReport,
     central: Option<Central>,
     ws: Workspace,
+    /// Whether `ws` holds the evaluation of `ws.w` at κ = 0 (what the Newton matrix at the
+    /// gradient point is assembled from), so that it need not be evaluated again.
+    evaluated: bool,
 }
 
 /// What a forward pass keeps of a solved step so that it can be linearised without solving it
@@ -418,13 +421,17 @@ impl SolveLinearization {
         let mut times = PhaseTimes::default();
         let t0 = Instant::now();
         validate_inputs(model, &point.state, &ws, ctrl, &AppliedForces::default())?;
-        newton::prepare(
-            model,
-            &point.state,
-            &mut ws,
-            ctrl,
-            &AppliedForces::default(),
-        );
+        let forces = AppliedForces::default();
+        if kappa_grad.is_none() {
+            // the stored solve fixed the contact activation: only the forces and the active
+            // candidates' geometry are read (`evaluate` prepares those), not a new solve's
+            // activation search over every candidate (a tenth of a Panda's reverse step)
+            ws.prepared.fill(false);
+            newton::prepare_smooth_forces(model, &point.state, &mut ws, ctrl, &forces);
+        } else {
+            // the central-path solve may widen the activation: prepare every candidate
+            newton::prepare(model, &point.state, &mut ws, ctrl, &forces);
+        }
         ws.w.copy_from_slice(&stored.w);
         ws.active.copy_from_slice(&stored.active);
         ws.saturated.copy_from_slice(&stored.saturated);
@@ -438,6 +445,7 @@ impl SolveLinearization {
         let solved = Solved {
             next,
             report: stored.report,
+            evaluated: central.is_none(),
             central,
             ws,
         };
@@ -461,6 +469,7 @@ impl SolveLinearization {
             report,
             central,
             mut ws,
+            evaluated,
         } = solved;
         let t0 = Instant::now();
         let kappa = match central {
@@ -468,7 +477,9 @@ impl SolveLinearization {
             None => 0.0,
         };
         // Newton matrix at the gradient point, factored once for every input direction
-        newton::evaluate(model, &point.state, &mut ws, false, kappa);
+        if !(evaluated && kappa == 0.0) {
+            newton::evaluate(model, &point.state, &mut ws, false, kappa);
+        }
         newton::assemble(model, &mut ws);
         if ws.matrix.factor(&model.topology.pattern).is_err() {
             return Err(not_converged(
@@ -569,24 +580,33 @@ impl SolveLinearization {
         let parts = &self.parts;
         let (ny, nz, nw) = (parts.y_z.nrows(), parts.y_z.ncols(), self.w.len());
         let mut full = parts.y_z.clone();
-        let mut x = vec![0.0; nw];
-        // the solves write only the live rows (and the right-hand sides lie in them): zeroing
-        // those between solves keeps `x` zero elsewhere (a full fill was 8400 rows on the A1)
-        let rezero = |x: &mut [f64], m: &crate::solver::graph_ldu::BlockMatrix| {
-            m.live_rows().iter().for_each(|r| x[r.clone()].fill(0.0))
-        };
         if ny <= nz {
-            for i in 0..ny {
-                for (kk, &k) in parts.w_cols.iter().enumerate() {
-                    x[k] = parts.y_w[(i, kk)];
+            // every output at once: row r of `xs` holds row r of R_w⁻ᵀ ∂Y/∂wᵀ (the buffer is
+            // zero between uses, so only the live rows are written and cleared)
+            let mut xs = std::mem::take(&mut self.ws.jacobian_rhs);
+            xs.resize(nw * ny, 0.0);
+            for (kk, &k) in parts.w_cols.iter().enumerate() {
+                for i in 0..ny {
+                    xs[k * ny + i] = parts.y_w[(i, kk)];
                 }
-                self.ws.matrix.solve_transpose(p, &mut x);
-                for c in 0..nz {
-                    full[(i, c)] -= parts.col_dot(c, &x);
-                }
-                rezero(&mut x, &self.ws.matrix);
             }
+            self.ws.matrix.solve_transpose_many(p, &mut xs, ny);
+            let (mut part, mut dots) = (vec![0.0; ny], vec![0.0; ny]);
+            for c in 0..nz {
+                parts.col_dot_many(c, &xs, ny, &mut part, &mut dots);
+                for (i, d) in dots.iter().enumerate() {
+                    full[(i, c)] -= d;
+                }
+            }
+            for r in self.ws.matrix.live_rows() {
+                xs[r.start * ny..r.end * ny].fill(0.0);
+            }
+            for &k in &parts.w_cols {
+                xs[k * ny..(k + 1) * ny].fill(0.0);
+            }
+            self.ws.jacobian_rhs = xs;
         } else {
+            let mut x = vec![0.0; nw];
             for c in 0..nz {
                 x.fill(0.0);
                 parts.col_add_to(c, 1.0, &mut x);
@@ -762,6 +782,7 @@ impl Linearization {
             report,
             central,
             ws,
+            evaluated: false,
         };
         SolveLinearization::at_solution(model, point, ctrl, wrt, kappa_grad, solved, times, method)
             .map(|l| Linearization(Kind::Whole(l)))

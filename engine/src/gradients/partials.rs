@@ -95,6 +95,23 @@ impl Partials {
         sum
     }
 
+    /// [`Self::col_dot`] against each of `k` vectors at once: `out[i] = ∂R/∂z[:, c] · v_i`,
+    /// where row `r` of `xs` holds `v_0[r], …, v_{k-1}[r]` (see
+    /// `BlockMatrix::solve_transpose_many`); the sums are formed in `col_dot`'s order.
+    pub fn col_dot_many(&self, c: usize, xs: &[f64], k: usize, part: &mut [f64], out: &mut [f64]) {
+        let mut col = self.col(c);
+        out[..k].fill(0.0);
+        for &(s, l) in &self.rows[c] {
+            let (head, rest) = col.split_at(l);
+            part[..k].fill(-0.0);
+            for (a, x) in head.iter().zip(xs[s * k..(s + l) * k].chunks_exact(k)) {
+                part.iter_mut().zip(x).for_each(|(p, x)| *p += a * x);
+            }
+            out.iter_mut().zip(&part[..k]).for_each(|(o, p)| *o += p);
+            col = rest;
+        }
+    }
+
     /// `dst += scale · ∂R/∂z[:, c]` (only the column's support is touched).
     pub fn col_add_to(&self, c: usize, scale: f64, dst: &mut [f64]) {
         let mut col = self.col(c);
