@@ -10,9 +10,7 @@
 //! `KAPPA_GRAD`, the central-path solve's iterations and how often it fell back to the neutral
 //! start.
 #![allow(clippy::print_stdout)]
-use ukemi_engine::{
-    Coordinates, Linearization, PartialsMethod, PhaseTimes, Workspace, Wrt, mjcf, step,
-};
+use ukemi_engine::{Coordinates, Linearization, PartialsMethod, PhaseTimes, Workspace, Wrt, step};
 
 #[path = "common/workload.rs"]
 mod workload;
@@ -72,9 +70,8 @@ fn main() {
     let kappa: Option<f64> = args.get(3).and_then(|s| s.parse().ok());
     let flag = |f: &str| args.iter().skip(4).any(|s| s == f);
     let with_reference = !flag("coloured");
-    let model = mjcf::load_path(std::path::Path::new(path)).unwrap().model;
+    let model = workload::load(path);
     let mut opts = model.options.clone();
-    opts.timestep = 0.01;
     opts.central_warm_start = !flag("neutral");
     let model = model.with_options(opts).unwrap();
     let mut state = workload::start_state(&model);

@@ -6,7 +6,7 @@
 //! `cargo run --release -p ukemi-engine --example rollout_bench -- MODEL.xml [STEPS] [KAPPA_GRAD|none]`
 #![allow(clippy::print_stdout)]
 use ukemi_engine::gradients::rollout_vjp;
-use ukemi_engine::{Coordinates, Workspace, mjcf, step};
+use ukemi_engine::{Coordinates, Workspace, step};
 
 #[path = "common/workload.rs"]
 mod workload;
@@ -16,10 +16,7 @@ fn main() {
     let path = args.get(1).expect("model path");
     let steps: usize = args.get(2).map_or(100, |s| s.parse().unwrap());
     let kappa: Option<f64> = args.get(3).and_then(|s| s.parse().ok());
-    let model = mjcf::load_path(std::path::Path::new(path)).unwrap().model;
-    let mut opts = model.options.clone();
-    opts.timestep = 0.01;
-    let model = model.with_options(opts).unwrap();
+    let model = workload::load(path);
     let state = workload::start_state(&model);
     let mut controls = workload::Controls::new();
     let ctrls: Vec<f64> = (0..steps).flat_map(|_| controls.next(&model)).collect();

@@ -10,7 +10,7 @@
 #![allow(clippy::print_stdout)]
 use std::time::Instant;
 
-use ukemi_engine::{Workspace, mjcf, step};
+use ukemi_engine::{Workspace, step};
 
 #[path = "common/workload.rs"]
 mod workload;
@@ -21,10 +21,7 @@ fn main() {
     let steps: usize = args.get(2).map_or(100, |s| s.parse().unwrap());
     let repeats: usize = args.get(3).map_or(1, |s| s.parse().unwrap());
     let seed: Option<u64> = args.get(4).map(|s| s.parse().unwrap());
-    let model = mjcf::load_path(std::path::Path::new(path)).unwrap().model;
-    let mut opts = model.options.clone();
-    opts.timestep = 0.01;
-    let model = model.with_options(opts).unwrap();
+    let model = workload::load(path);
     let mut best = f64::INFINITY;
     let mut last = None;
     for _ in 0..repeats {

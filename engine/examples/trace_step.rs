@@ -7,20 +7,15 @@
 //! `UKEMI_TRACE_MAX_ITER=N` solves the traced step (only) with an iteration budget of N, and
 //! `UKEMI_TRACE_CTRL=u1,u2,...` with those controls.
 #![allow(clippy::print_stdout)]
-use ukemi_engine::{Workspace, mjcf, step};
+use ukemi_engine::{Workspace, step};
 
 #[path = "common/workload.rs"]
 mod workload;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let model = mjcf::load_path(std::path::Path::new(&args[1]))
-        .unwrap()
-        .model;
+    let model = workload::load(&args[1]);
     let which: usize = args.get(2).map_or(0, |s| s.parse().unwrap());
-    let mut opts = model.options.clone();
-    opts.timestep = 0.01;
-    let model = model.with_options(opts).unwrap();
     let mut state = workload::start_state(&model);
     let mut ws = Workspace::new(&model);
     let mut controls = match args.get(3) {

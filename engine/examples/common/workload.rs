@@ -1,6 +1,14 @@
 //! The Table V workload shared by the examples: the model's first keyframe (else its reference
 //! pose) and deterministic controls uniform in each actuator's control range.
-use ukemi_engine::{Model, State, set_minimal};
+use ukemi_engine::{Model, State, mjcf, set_minimal};
+
+/// The MJCF model at `path` with Table V's time step, 0.01 s.
+pub fn load(path: &str) -> Model {
+    let model = mjcf::load_path(std::path::Path::new(path)).unwrap().model;
+    let mut opts = model.options.clone();
+    opts.timestep = 0.01;
+    model.with_options(opts).unwrap()
+}
 
 /// The state at the model's first keyframe, else at `qpos0` at rest.
 pub fn start_state(model: &Model) -> State {
