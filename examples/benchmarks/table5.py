@@ -9,6 +9,11 @@ its reference figures) on the same MJCF file, in the same run, each timing the m
     .venv/bin/python examples/benchmarks/table5.py --only shared/   # the four shared robots
     .venv/bin/python examples/benchmarks/table5.py --kappa-grad 1e-4   # smoothed gradients
     .venv/bin/python examples/benchmarks/table5.py --tol 1e-6   # looser solver (Dojo.jl's rtol)
+    .venv/bin/python examples/benchmarks/table5.py --threads 1   # rollout VJP on one thread
+
+The rollout VJP linearises its steps on the other threads while its forward pass runs (rayon's
+default: one thread per core; `--threads` sets `ukemi.set_num_threads`); the step-by-step
+columns and MuJoCo run on one thread.
 
 Per-phase timings of the Jacobians (solve, central path, factorisation, partials,
 back-substitution): `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml`.
@@ -110,7 +115,10 @@ def main():
     ap.add_argument("--tol", type=float, default=None,
                     help="solver tolerance, rtol = kappa_tol = TOL (default: the model's, 1e-10 "
                          "and 1e-11); what accuracy costs in time")
+    ap.add_argument("--threads", type=int, default=0,
+                    help="threads of the rollout VJP (ukemi.set_num_threads; 0: one per core)")
     args = ap.parse_args()
+    ukemi.set_num_threads(args.threads)
     kappa = args.kappa_grad
     mean = lambda f: [sum(x) / args.repeats for x in zip(*(f() for _ in range(args.repeats)))]
     rng = np.random.default_rng(0)
@@ -145,7 +153,8 @@ def main():
               + (f"   ({ff} fwd / {fj} jac steps unconverged)" if ff or fj else ""))
     print("ratio = ukemi/MuJoCo (target: A,B ≤ 0.5; rollout VJP ≤ 0.1 of MuJoCo's FD); "
           "grad ovh = step_jacobians minus a plain step from the same states (successful ones); "
-          "* = rollout VJP stopped at an unconverged step")
+          "* = rollout VJP stopped at an unconverged step; "
+          f"rollout VJP on {ukemi.get_num_threads()} thread(s)")
 
 
 if __name__ == "__main__":

@@ -137,6 +137,11 @@ def rollout_vjp(model, state, ctrls, adjoint_states, *, kappa_grad=MODEL_DEFAULT
                 coordinates="minimal", params=True):
     """Gradient of a loss on a whole rollout by one reverse sweep in Rust.
 
+    With more than one thread (``ukemi.set_num_threads``; rayon's default is one per core)
+    each step is linearised on the other threads while the forward pass goes on, so the call
+    takes about as long as the forward rollout; on one thread each step is linearised when
+    the sweep reaches it.
+
     Args:
         ctrls: (T, nu) controls.
         adjoint_states: (T + 1, ny) gradients of the loss with respect to each state x_0..x_T

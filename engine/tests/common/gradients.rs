@@ -172,6 +172,16 @@ pub fn check_rollout_vjp_in(
     let ctrls: Vec<f64> = (0..t * nu).map(|i| (i as f64 * 0.37).sin()).collect();
     let adj: Vec<f64> = (0..(t + 1) * ny).map(|i| (i as f64 * 0.91).cos()).collect();
     let r = rollout_vjp(m, s0, &ctrls, t, &adj, coords, kappa, true).unwrap();
+    // on one thread the sweep linearises each step when it reaches it and applies one
+    // transposed back-substitution (with more, the steps' Jacobians are formed on the pool
+    // during the forward pass): check that sweep too
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let r_seq = one
+        .install(|| rollout_vjp(m, s0, &ctrls, t, &adj, coords, kappa, true))
+        .unwrap();
     // forward: Jacobians of every step along the same chain
     let mut states = vec![s0.clone()];
     let mut jacs = Vec::new();
@@ -183,17 +193,22 @@ pub fn check_rollout_vjp_in(
     }
     let mut a = nalgebra::DVector::from_column_slice(&adj[t * ny..]);
     let mut params = nalgebra::DVector::zeros(m.params().len());
+    let mut g_us = vec![nalgebra::DVector::zeros(nu); t];
     for k in (0..t).rev() {
-        let g_u = jacs[k].b.transpose() * &a;
-        for i in 0..nu {
-            assert!((g_u[i] - r.ctrls[k * nu + i]).abs() < tol * g_u.amax().max(1.0));
-        }
+        g_us[k] = jacs[k].b.transpose() * &a;
         params += jacs[k].c.transpose() * &a;
         a = jacs[k].a.transpose() * &a
             + nalgebra::DVector::from_column_slice(&adj[k * ny..(k + 1) * ny]);
     }
-    let d0 = (a.clone() - nalgebra::DVector::from_vec(r.state0)).amax();
-    let dp = (params.clone() - nalgebra::DVector::from_vec(r.params)).amax();
-    assert!(d0 < tol * a.amax().max(1.0), "state0 {d0:e}");
-    assert!(dp < tol * params.amax().max(1.0), "params {dp:e}");
+    for r in [r, r_seq] {
+        for (k, g_u) in g_us.iter().enumerate() {
+            for i in 0..nu {
+                assert!((g_u[i] - r.ctrls[k * nu + i]).abs() < tol * g_u.amax().max(1.0));
+            }
+        }
+        let d0 = (a.clone() - nalgebra::DVector::from_vec(r.state0)).amax();
+        let dp = (params.clone() - nalgebra::DVector::from_vec(r.params)).amax();
+        assert!(d0 < tol * a.amax().max(1.0), "state0 {d0:e}");
+        assert!(dp < tol * params.amax().max(1.0), "params {dp:e}");
+    }
 }
