@@ -117,6 +117,40 @@ def test_products_equal_jacobian_products():
     np.testing.assert_allclose(gps, gp_ref, rtol=1e-8, atol=1e-12)
 
 
+@pytest.mark.parametrize("kappa", [None, 1e-4])
+def test_rollout_jacobians_are_the_chained_step_jacobians(kappa):
+    # a box pushed on the floor: it sticks, slides and stops again along the rollout
+    m = box_on_floor()
+    s = settle(m)
+    T = 12
+    ctrls = 8.0 * np.sin(0.3 * np.arange(T))[:, None]
+    try:
+        r = ukemi.rollout_jacobians(m, s, ctrls, kappa_grad=kappa)
+        ukemi.set_num_threads(1)  # the sequential path: each step linearised in turn
+        r1 = ukemi.rollout_jacobians(m, s, ctrls, kappa_grad=kappa)
+    finally:
+        ukemi.set_num_threads(0)
+    assert r.A.shape == (T, 12, 12) and r.B.shape == (T, 12, 1)
+    assert r.C.shape == (T, 12, len(m.params)) and len(r.states) == T + 1
+    for x, y in [(r.A, r1.A), (r.B, r1.B), (r.C, r1.C)]:
+        assert np.array_equal(x, y)  # the same bits on one thread or two
+    speeds = []
+    for k in range(T):
+        j = ukemi.step_jacobians(m, r.states[k], ctrls[k], kappa_grad=kappa)
+        for x, y in [(r.A[k], j.A), (r.B[k], j.B), (r.C[k], j.C)]:
+            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-12 * np.abs(y).max())
+        np.testing.assert_array_equal(r.states[k + 1].qpos, j.next_state.qpos)
+        speeds.append(abs(r.states[k + 1].qvel[0]))
+    assert min(speeds) < 1e-6 and max(speeds) > 1e-2  # sticks and slides
+    with pytest.raises(ukemi.ShapeError, match="ctrls"):
+        ukemi.rollout_jacobians(m, s, np.zeros((T, 2)))
+    with pytest.raises(ValueError, match="wrt"):
+        ukemi.rollout_jacobians(m, s, ctrls, wrt=("state", "torque"))
+    bad = m.with_options(max_iter=1, endgame_iter=0, max_subdivisions=1)
+    with pytest.raises(ukemi.ConvergenceError, match=r"step \d+"):
+        ukemi.rollout_jacobians(bad, s, 30.0 + ctrls)
+
+
 def test_pendulum_jacobians_agree_with_mujoco_transition_fd():
     mujoco = pytest.importorskip("mujoco")
     xml = """<mujoco><option timestep="{h}" integrator="Euler"/>

@@ -5,7 +5,7 @@ use numpy::{
     PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
-use ukemi_engine::gradients::{flat, rollout_vjp};
+use ukemi_engine::gradients::{flat, rollout_jacobians, rollout_vjp};
 use ukemi_engine::{Coordinates, Linearization, Model, Wrt};
 
 use crate::errors::{InputError, IntoPy, ModelMismatchError, guard};
@@ -214,6 +214,80 @@ pub fn rollout_vjp_py<'py>(
             PyArray1::from_vec(py, r.state0),
             PyArray1::from_vec(py, r.ctrls).reshape([nstep, nu])?,
             PyArray1::from_vec(py, r.params),
+        ))
+    })
+}
+
+/// `(T, r, c)` row-major from `T` matrices of shape `(r, c)`.
+fn stacked<'py>(
+    py: Python<'py>,
+    ms: &[&nalgebra::DMatrix<f64>],
+    (r, c): (usize, usize),
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let mut data = Vec::with_capacity(ms.len() * r * c);
+    for m in ms {
+        data.extend_from_slice(m.transpose().as_slice());
+    }
+    PyArray1::from_vec(py, data).reshape([ms.len(), r, c])
+}
+
+/// Jacobians of every step of a rollout: `(A (T, ny, ny), B (T, ny, nu), C (T, ny, np),
+/// states x_0..=x_T)`; a block has no columns when its input was not selected.
+#[pyfunction]
+#[pyo3(name = "_rollout_jacobians")]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub fn rollout_jacobians_py<'py>(
+    py: Python<'py>,
+    model: &PyModel,
+    state: &PyState,
+    ctrls: PyReadonlyArray2<'py, f64>,
+    kappa_grad: Option<f64>,
+    coordinates: &str,
+    wrt_state: bool,
+    wrt_ctrl: bool,
+    wrt_params: bool,
+) -> PyResult<(
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray3<f64>>,
+    Vec<PyState>,
+)> {
+    guard(|| {
+        same_model(model, state)?;
+        let c = coords(coordinates)?;
+        let nstep = ctrls.shape()[0];
+        let ctrls = ctrls.as_slice()?.to_vec();
+        let m = model.inner.clone();
+        let s = state.inner.clone();
+        let wrt = Wrt {
+            state: wrt_state,
+            ctrl: wrt_ctrl,
+            params: wrt_params,
+        };
+        let r = py
+            .detach(|| rollout_jacobians(&m, &s, &ctrls, nstep, c, wrt, kappa_grad))
+            .py()?;
+        let ny = c.dim(&m);
+        let cols = |f: fn(&ukemi_engine::Jacobians) -> &nalgebra::DMatrix<f64>, n: usize| {
+            let ms: Vec<_> = r.steps.iter().map(f).collect();
+            stacked(py, &ms, (ny, n))
+        };
+        let nx = if wrt_state { ny } else { 0 };
+        let nu = if wrt_ctrl { m.nu() } else { 0 };
+        let np = if wrt_params { m.params().len() } else { 0 };
+        let states = r
+            .states
+            .into_iter()
+            .map(|inner| PyState {
+                model: model.inner.clone(),
+                inner,
+            })
+            .collect();
+        Ok((
+            cols(|j| &j.a, nx)?,
+            cols(|j| &j.b, nu)?,
+            cols(|j| &j.c, np)?,
+            states,
         ))
     })
 }

@@ -9,11 +9,12 @@ its reference figures) on the same MJCF file, in the same run, each timing the m
     .venv/bin/python examples/benchmarks/table5.py --only shared/   # the four shared robots
     .venv/bin/python examples/benchmarks/table5.py --kappa-grad 1e-4   # smoothed gradients
     .venv/bin/python examples/benchmarks/table5.py --tol 1e-6   # looser solver (Dojo.jl's rtol)
-    .venv/bin/python examples/benchmarks/table5.py --threads 1   # rollout VJP on one thread
+    .venv/bin/python examples/benchmarks/table5.py --threads 1   # rollouts on one thread
 
-The rollout VJP linearises its steps on the other threads while its forward pass runs (rayon's
-default: one thread per core; `--threads` sets `ukemi.set_num_threads`); the step-by-step
-columns and MuJoCo run on one thread.
+`ukemi.rollout_jacobians` (the A,B workload in one call) and the rollout VJP linearise their
+steps on the other threads while their forward pass runs (rayon's default: one thread per core;
+`--threads` sets `ukemi.set_num_threads`); the step-by-step columns and MuJoCo run on one
+thread.
 
 Per-phase timings of the Jacobians (solve, central path, factorisation, partials,
 back-substitution): `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml`.
@@ -84,6 +85,19 @@ def bench_rollout_vjp(model, ctrls, kappa_grad):
     return time.perf_counter() - t0, ok
 
 
+def bench_rollout_jacobians(model, ctrls, kappa_grad):
+    """The A,B workload in one call: `ukemi.rollout_jacobians` (its steps linearised on the
+    other threads while the forward pass runs)."""
+    s = model.make_state(key=model.keyframe_names[0]) if model.keyframe_names else model.make_state()
+    t0 = time.perf_counter()
+    try:
+        ukemi.rollout_jacobians(model, s, ctrls, wrt=("state", "ctrl"), kappa_grad=kappa_grad)
+        ok = True
+    except ukemi.ConvergenceError:
+        ok = False
+    return time.perf_counter() - t0, ok
+
+
 def bench_mujoco(path, ctrls, with_jac):
     import mujoco
 
@@ -116,7 +130,7 @@ def main():
                     help="solver tolerance, rtol = kappa_tol = TOL (default: the model's, 1e-10 "
                          "and 1e-11); what accuracy costs in time")
     ap.add_argument("--threads", type=int, default=0,
-                    help="threads of the rollout VJP (ukemi.set_num_threads; 0: one per core)")
+                    help="threads of the rollouts (ukemi.set_num_threads; 0: one per core)")
     args = ap.parse_args()
     ukemi.set_num_threads(args.threads)
     kappa = args.kappa_grad
@@ -124,7 +138,7 @@ def main():
     rng = np.random.default_rng(0)
     print(f"{'model':24s} {'nv':>4s} {'nu':>3s} | {'ukemi fwd':>10s} {'mj fwd':>9s} | "
           f"{'ukemi A,B':>10s} {'mj FD':>9s} {'ratio':>6s} {'grad ovh':>9s} | "
-          f"{'rollout VJP':>11s} {'/mj FD':>7s}")
+          f"{'rollout A,B':>11s} {'/mj FD':>7s} | {'rollout VJP':>11s} {'/mj FD':>7s}")
     for name, path in models():
         if args.only not in name:
             continue
@@ -146,15 +160,18 @@ def main():
         ctrls = random_ctrls(lo, hi, args.steps, rng)
         tf, ff, _ = mean(lambda: bench_ukemi(model, ctrls, False, kappa))
         tj, fj, oj = mean(lambda: bench_ukemi(model, ctrls, True, kappa))
+        tr, okr = mean(lambda: bench_rollout_jacobians(model, ctrls, kappa))
         tv, okv = mean(lambda: bench_rollout_vjp(model, ctrls, kappa))
         mf, mj = mean(lambda: (bench_mujoco(path, ctrls, False), bench_mujoco(path, ctrls, True)))
         print(f"{name:24s} {model.nv:4d} {model.nu:3d} | {tf:9.3f}s {mf:8.3f}s | {tj:9.3f}s {mj:8.3f}s "
-              f"{tj / mj:6.2f} {oj:8.3f}s | {tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f}"
+              f"{tj / mj:6.2f} {oj:8.3f}s | {tr:10.3f}s{'' if okr else '*'} {tr / mj:7.2f} | "
+              f"{tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f}"
               + (f"   ({ff} fwd / {fj} jac steps unconverged)" if ff or fj else ""))
     print("ratio = ukemi/MuJoCo (target: A,B ≤ 0.5; rollout VJP ≤ 0.1 of MuJoCo's FD); "
           "grad ovh = step_jacobians minus a plain step from the same states (successful ones); "
-          "* = rollout VJP stopped at an unconverged step; "
-          f"rollout VJP on {ukemi.get_num_threads()} thread(s)")
+          "rollout A,B = the same workload in one ukemi.rollout_jacobians call; "
+          "* = the rollout stopped at an unconverged step; "
+          f"the rollouts ran on {ukemi.get_num_threads()} thread(s)")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,15 @@ from __future__ import annotations
 from . import _ukemi, models
 from ._builder import JOINT_KINDS, ModelBuilder
 from ._loaders import gymnasium_asset_path, load
-from ._gradients import StepJacobians, rollout_vjp, step_jacobians, step_jvp, step_vjp
+from ._gradients import (
+    RolloutJacobians,
+    StepJacobians,
+    rollout_jacobians,
+    rollout_vjp,
+    step_jacobians,
+    step_jvp,
+    step_vjp,
+)
 from ._simulate import (STATUS_NAMES, SUCCESS_STATUSES, Trajectory, rollout, signed_distances,
                         solver_trace, step, step_smoothed)
 from ._ukemi import Model, State, StepInfo, get_num_threads, set_num_threads
@@ -50,6 +58,7 @@ __all__ = [
     "ModelBuilder",
     "ModelError",
     "ModelMismatchError",
+    "RolloutJacobians",
     "ShapeError",
     "State",
     "StepInfo",
@@ -63,6 +72,7 @@ __all__ = [
     "load",
     "models",
     "rollout",
+    "rollout_jacobians",
     "rollout_vjp",
     "set_num_threads",
     "signed_distances",

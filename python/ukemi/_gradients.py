@@ -107,6 +107,45 @@ def step_jacobians(model, state, ctrl=None, *, kappa_grad=MODEL_DEFAULT, coordin
     return StepJacobians(a, b, cm, nxt, info, cinfo, c, k)
 
 
+@dataclass(frozen=True)
+class RolloutJacobians:
+    """Result of :func:`rollout_jacobians`."""
+
+    A: np.ndarray  #: (T, ny, ny) d(x_{k+1})/d(x_k)
+    B: np.ndarray  #: (T, ny, nu) d(x_{k+1})/d(u_k)
+    C: np.ndarray  #: (T, ny, nparams) d(x_{k+1})/d(model.params)
+    states: list  #: x_0..x_T (T + 1 ukemi.State)
+    coordinates: str
+    kappa_grad: float | None
+
+
+def rollout_jacobians(model, state, ctrls, *, kappa_grad=MODEL_DEFAULT, coordinates="minimal",
+                      wrt=_WRT) -> RolloutJacobians:
+    """Roll out ``ctrls`` (T, nu) from ``state`` and return the Jacobians of every step: what
+    iLQR/DDP and the Dojo paper's Table V workload need, in one call into Rust.
+
+    Step k's Jacobians are :func:`step_jacobians` of ``states[k]`` with ``ctrls[k]`` (in
+    minimal coordinates each state is rebuilt from ``(qpos, qvel)`` first, as there). With more
+    than one thread (``ukemi.set_num_threads``; rayon's default is one per core) the steps are
+    linearised on the other threads while the forward pass goes on, with the same results bit
+    for bit.
+
+    Raises:
+        ConvergenceError: a step (or its move to the central path) did not converge; the
+            message names the step.
+    """
+    _check(model, state)
+    bad = [w for w in wrt if w not in _WRT]
+    if bad:
+        raise ValueError(f"`wrt` entries must be among {_WRT}, got {bad!r}")
+    k = resolve_kappa(model, kappa_grad)
+    c = _coords(coordinates)
+    ctrls = as_float_array("ctrls", ctrls, (-1, model.nu))
+    a, b, cm, states = _ukemi._rollout_jacobians(
+        model, state, ctrls, k, c, "state" in wrt, "ctrl" in wrt, "params" in wrt)
+    return RolloutJacobians(a, b, cm, states, c, k)
+
+
 def step_vjp(model, state, ctrl, adjoint_next, *, kappa_grad=MODEL_DEFAULT, coordinates="minimal",
              params=True):
     """Adjoints ``(adj_state, adj_ctrl, adj_params)`` of one step given ``adjoint_next``

@@ -55,7 +55,7 @@ use crate::step::{AppliedForces, validate_inputs};
 use crate::{Error, Result, ensure};
 pub use partials::PartialsMethod;
 use partials::{Input, Partials};
-pub use rollout::{RolloutAdjoint, rollout_vjp};
+pub use rollout::{RolloutAdjoint, RolloutJacobians, rollout_jacobians, rollout_vjp};
 use substeps::{StoredSubsteps, Substeps};
 pub use tangent::Coordinates;
 use tangent::Point;

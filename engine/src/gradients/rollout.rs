@@ -135,13 +135,111 @@ impl Sweep {
             .saturating_mul(ny)
             .saturating_mul(nz)
             .saturating_mul(8);
-        let free = rayon::current_thread_index().is_none() && flat::num_threads() > 1;
-        if free && bytes <= OVERLAP_BUDGET {
+        if spare_thread() && bytes <= OVERLAP_BUDGET {
             Sweep::Overlapped
         } else {
             Sweep::Sequential
         }
     }
+}
+
+/// Whether there is a second thread to put work on: the pool ([`flat::num_threads`]) has
+/// more than one, and the call is not already running on it (a batch fills the pool by
+/// itself).
+fn spare_thread() -> bool {
+    rayon::current_thread_index().is_none() && flat::num_threads() > 1
+}
+
+/// The Jacobians of every step of a rollout (what [`Linearization::jacobians`] gives for each
+/// step from the state the rollout reached), and the states `x_0..=x_T`.
+#[derive(Clone, Debug)]
+pub struct RolloutJacobians {
+    /// `x_0..=x_T` (in minimal coordinates each state is rebuilt from `(qpos, qvel)` first,
+    /// as [`rollout_vjp`] does, so the rollout is `x_{k+1} = F(x_k, u_k)` exactly).
+    pub states: Vec<State>,
+    /// The Jacobians of step `k`, `∂x_{k+1}/∂(x_k, u_k, θ)`.
+    pub steps: Vec<Jacobians>,
+}
+
+/// Roll out `nstep` steps from `state` with `ctrls` (row-major `(nstep, nu)`) and linearise
+/// every step (the inputs `wrt`, gradients at `kappa_grad` as for [`Linearization::new`]):
+/// what trajectory optimisers (iLQR, DDP) and Table V's workload need. With a second thread
+/// the steps are linearised on the pool while the forward pass goes on (see the module docs),
+/// with the same results bit for bit.
+#[allow(clippy::too_many_arguments)]
+pub fn rollout_jacobians(
+    model: &Model,
+    state: &State,
+    ctrls: &[f64],
+    nstep: usize,
+    coords: Coordinates,
+    wrt: Wrt,
+    kappa_grad: Option<f64>,
+) -> Result<RolloutJacobians> {
+    rollout_jacobians_sweep(
+        model,
+        state,
+        ctrls,
+        nstep,
+        coords,
+        wrt,
+        kappa_grad,
+        spare_thread(),
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn rollout_jacobians_sweep(
+    model: &Model,
+    state: &State,
+    ctrls: &[f64],
+    nstep: usize,
+    coords: Coordinates,
+    wrt: Wrt,
+    kappa_grad: Option<f64>,
+    overlapped: bool,
+) -> Result<RolloutJacobians> {
+    let nu = model.nu();
+    ensure!(
+        ctrls.len() == nstep * nu,
+        Error::shape("ctrls", &[nstep, nu], &[ctrls.len() / nu.max(1), nu])
+    );
+    state.check_model(model)?;
+    super::check_kappa(kappa_grad)?;
+    let state0 = Point::new(model, state, coords)?.state;
+    let (states, steps) = if overlapped {
+        flat::in_pool(|| forward_overlapped(model, state0, ctrls, nstep, coords, wrt, kappa_grad))?
+    } else {
+        let (states, solutions, ws) = forward_stored(model, state0, ctrls, nstep, coords)?;
+        let mut spare = Some(ws);
+        let mut steps = Vec::with_capacity(nstep);
+        for (k, stored) in solutions.iter().enumerate() {
+            let u = &ctrls[k * nu..(k + 1) * nu];
+            let ws = spare.take().unwrap_or_else(|| Workspace::pooled(model));
+            let jac = Linearization::from_stored(
+                model, &states[k], u, coords, wrt, kappa_grad, stored, ws,
+            )
+            .and_then(|mut lin| {
+                let jac = lin.jacobians(model);
+                spare = Some(lin.into_workspace());
+                jac
+            });
+            steps.push(Some(jac));
+        }
+        (states, steps)
+    };
+    let steps = steps
+        .into_iter()
+        .enumerate()
+        .map(|(k, jac)| {
+            jac.ok_or_else(|| {
+                // unreachable: the scope returns after every spawned step has set its slot
+                Error::Unsupported(format!("rollout step {k}: its Jacobians were not formed"))
+            })?
+            .map_err(|e| e.at(format!(" (step {k})")))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(RolloutJacobians { states, steps })
 }
 
 /// [`rollout_vjp`] with the loss adjoint of each state supplied by `adjoint(k, x_k, out)`
@@ -235,7 +333,9 @@ pub(crate) fn rollout_vjp_sweep(
         let u = &ctrls[k * nu..(k + 1) * nu];
         let a = match &mut reverse {
             Reverse::Stored(solutions, spare) => {
-                let ws = spare.take().map_or_else(|| Workspace::pooled(model), |ws| *ws);
+                let ws = spare
+                    .take()
+                    .map_or_else(|| Workspace::pooled(model), |ws| *ws);
                 let stored = &solutions[k];
                 let mut lin = Linearization::from_stored(
                     model, &states[k], u, coords, wrt, kappa_grad, stored, ws,
@@ -436,6 +536,39 @@ mod tests {
                 );
             }
             assert!(a.ctrls.iter().any(|g| g.abs() > 1e-3), "{:?}", a.ctrls);
+        }
+    }
+
+    /// The Jacobians along a rollout are those of each step linearised on its own from the
+    /// state the rollout reached, and both ways of forming them give the same bits.
+    #[test]
+    fn rollout_jacobians_are_the_steps_jacobians() {
+        let (m, s) = pushed_box();
+        let (t, c) = (20, Coordinates::Minimal);
+        let ctrls: Vec<f64> = (0..t).map(push).collect();
+        for kappa in [None, Some(1e-4)] {
+            let r = rollout_jacobians_sweep(&m, &s, &ctrls, t, c, Wrt::ALL, kappa, true).unwrap();
+            let q = rollout_jacobians_sweep(&m, &s, &ctrls, t, c, Wrt::ALL, kappa, false).unwrap();
+            assert_eq!((r.states.len(), r.steps.len()), (t + 1, t));
+            for (k, (a, b)) in r.steps.iter().zip(&q.steps).enumerate() {
+                for (x, y) in [(&a.a, &b.a), (&a.b, &b.b), (&a.c, &b.c)] {
+                    let same = x
+                        .iter()
+                        .zip(y.iter())
+                        .all(|(p, q)| p.to_bits() == q.to_bits());
+                    assert!(same, "step {k}, kappa {kappa:?}");
+                }
+                let mut lin =
+                    Linearization::new(&m, &r.states[k], &ctrls[k..=k], c, Wrt::ALL, kappa)
+                        .unwrap();
+                let j = lin.jacobians(&m).unwrap();
+                for (x, y) in [(&a.a, &j.a), (&a.b, &j.b), (&a.c, &j.c)] {
+                    let scale = y.amax().max(1.0);
+                    assert!((x - y).amax() <= 1e-12 * scale, "step {k}, kappa {kappa:?}");
+                }
+                let next = Point::new(&m, lin.next_state(), c).unwrap().state;
+                assert_eq!(crate::qpos(&m, &next), crate::qpos(&m, &r.states[k + 1]));
+            }
         }
     }
 
