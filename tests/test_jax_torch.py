@@ -103,6 +103,44 @@ def test_jax_rollout_grad_with_params_through_contact():
     assert np.all(np.isfinite(gu))
 
 
+def _kept():
+    """(hits, misses, rollouts kept) of the forward rollouts the engine keeps for their VJPs."""
+    return ukemi._ukemi._kept_rollouts()[:3]
+
+
+@pytest.mark.parametrize("how", ["ffi", "callback"])
+def test_differentiated_rollouts_keep_their_forward_pass_for_the_backward(how):
+    # a ball thrown along the floor, pushed: the VJP of the differentiated rollout takes the
+    # forward pass the engine kept instead of solving every step again
+    m = ball_on_floor()
+    x = np.concatenate([m.make_state().qpos, [0.5, 0.0, -0.3, 0, 0, 0]])
+    us = 0.4 * np.sin(np.arange(8))[:, None]
+    w = _weights(9 * x.size).reshape(9, x.size)
+    ref = ukemi._flat.rollout_vjp(m, x, us, None, np.broadcast_to(w, (9, x.size)), 1e-4)
+    ujax.set_backend(how)
+    try:
+        h0, _, n0 = _kept()
+        ujax.rollout(m, jnp.asarray(x), jnp.asarray(us), kappa_grad=1e-4).block_until_ready()
+        assert _kept()[2] == n0  # a plain call keeps nothing
+        gx, gu = jax.grad(lambda x, us: jnp.sum(w * ujax.rollout(m, x, us, kappa_grad=1e-4)),
+                          argnums=(0, 1))(jnp.asarray(x), jnp.asarray(us))
+        h1, _, n1 = _kept()
+        assert h1 == h0 + 1 and n1 == n0  # kept, then taken by the backward pass
+    finally:
+        ujax.set_backend("auto")
+    np.testing.assert_allclose(gx, ref[0], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(gu, ref[1], rtol=1e-12, atol=1e-12)
+    # torch: kept only when a gradient is wanted
+    xt, ut = torch.tensor(x, requires_grad=True), torch.tensor(us, requires_grad=True)
+    with torch.no_grad():
+        utorch.rollout(m, xt, ut, kappa_grad=1e-4)
+    assert _kept()[2] == n1
+    (torch.tensor(w) * utorch.rollout(m, xt, ut, kappa_grad=1e-4)).sum().backward()
+    assert _kept()[0] == h1 + 1 and _kept()[2] == n1
+    np.testing.assert_allclose(xt.grad.numpy(), ref[0], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(ut.grad.numpy(), ref[1], rtol=1e-12, atol=1e-12)
+
+
 def test_jax_vmap_grad_over_a_batch():
     m = arm()
     xs = np.stack([x0_of(m, s) for s in (0.1, 0.5, 1.0)])

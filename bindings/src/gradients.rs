@@ -218,6 +218,13 @@ pub fn rollout_vjp_py<'py>(
     })
 }
 
+/// `(hits, misses, rollouts kept, bytes kept)` of the forward rollouts kept for their VJPs.
+#[pyfunction]
+#[pyo3(name = "_kept_rollouts")]
+pub fn kept_rollouts() -> (usize, usize, usize, usize) {
+    ukemi_engine::gradients::kept::stats()
+}
+
 /// `(T, r, c)` row-major from `T` matrices of shape `(r, c)`.
 fn stacked<'py>(
     py: Python<'py>,
@@ -421,13 +428,14 @@ pub fn flat_step_vjp<'py>(
 
 /// Batched flat rollouts: `x0s (B, nx)`, `us (B, T, nu)` → `(B, T+1, nx)`.
 #[pyfunction]
-#[pyo3(name = "_flat_rollout", signature = (model, x0s, us, params=None))]
+#[pyo3(name = "_flat_rollout", signature = (model, x0s, us, params=None, keep=false))]
 pub fn flat_rollout<'py>(
     py: Python<'py>,
     model: &PyModel,
     x0s: PyReadonlyArray2<'py, f64>,
     us: PyReadonlyArray3<'py, f64>,
     params: Option<PyReadonlyArray2<'py, f64>>,
+    keep: bool,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     guard(|| {
         let (b, n) = (x0s.shape()[0], x0s.shape()[1]);
@@ -440,11 +448,12 @@ pub fn flat_rollout<'py>(
             .detach(|| {
                 let models = models_for(&m, p, b)?;
                 flat::batched(&models, b, |mm, i| {
-                    flat::rollout(
+                    flat::rollout_kept(
                         mm,
                         &x0s[i * n..(i + 1) * n],
                         &us[i * t * nu..(i + 1) * t * nu],
                         t,
+                        keep,
                     )
                 })
             })

@@ -8,8 +8,10 @@
 //! `broadcast_all` tiles it), so a new model needs neither a new registration nor an attribute.
 //! The other arguments and results are float64 arrays whose leading axes are batch axes
 //! (identical for every argument; the Python layer broadcasts them), flattened and run in
-//! parallel with rayon ([`flat::batched`]). Attributes: `with_params` (integer/bool scalar) and,
-//! for the VJPs, `kappa_grad` (f64; negative or NaN means `None`, the exact gradient).
+//! parallel with rayon ([`flat::batched`]). Attributes: `with_params` (integer/bool scalar),
+//! for the VJPs `kappa_grad` (f64; negative or NaN means `None`, the exact gradient), and for
+//! the rollout `keep` (integer/bool: keep the forward pass for the VJP that follows under
+//! differentiation, `ukemi_engine::gradients::kept`).
 //!
 //! | target                  | arguments                           | results                     |
 //! |-------------------------|-------------------------------------|-----------------------------|
@@ -698,6 +700,8 @@ fn rollout_impl(f: &Frame) -> HResult<()> {
     f.counts(4, 1)?;
     let m = f.model()?;
     let with_params = f.flag("with_params")?;
+    // under differentiation: keep the forward pass for the VJP (`ukemi_engine::gradients::kept`)
+    let keep = f.flag("keep")?;
     let (n, nu, np) = (flat::nx(&m), m.nu(), m.params().len());
     let x0 = f.arg(1, "x0")?;
     let lead = x0.lead(&[Some(n)])?;
@@ -715,11 +719,12 @@ fn rollout_impl(f: &Frame) -> HResult<()> {
     let out = out.f64s_mut()?;
     let b = batch_of(lead);
     let res = run_batch(&m, with_params.then_some(ps), b, |mm, i| {
-        flat::rollout(
+        flat::rollout_kept(
             mm,
             &x0s[i * n..(i + 1) * n],
             &uss[i * t * nu..(i + 1) * t * nu],
             t,
+            keep,
         )
     })?;
     scatter(out, res, (t + 1) * n);

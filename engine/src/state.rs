@@ -42,6 +42,19 @@ pub struct State {
 }
 
 impl State {
+    /// Bytes of the state's arrays (what keeping it costs).
+    pub(crate) fn heap_bytes(&self) -> usize {
+        let lens = [
+            &self.com_pos,
+            &self.quat,
+            &self.com_linvel,
+            &self.angvel_b,
+            &self.joint_impulse,
+            &self.ineq_vars,
+        ];
+        8 * lens.iter().map(|v| v.len()).sum::<usize>()
+    }
+
     /// The length of the interval of the state's velocities ([`State::interval`]) when stepped
     /// with time step `h`.
     pub(crate) fn interval(&self, h: f64) -> f64 {

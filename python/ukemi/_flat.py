@@ -73,7 +73,9 @@ def step_vjp(model, x, u, p, g, kappa_grad):
     return gx, gu, gp
 
 
-def rollout(model, x0, us, p):
+def rollout(model, x0, us, p, keep=False):
+    """Rollouts; ``keep`` keeps the forward pass in Rust for the ``rollout_vjp`` with the same
+    inputs that differentiation calls next (it then solves no step again)."""
     nx, nu, np_ = sizes(model)
     x0, us = np.asarray(x0, np.float64), np.asarray(us, np.float64)
     if us.ndim < 2 or us.shape[-1] != nu:
@@ -86,7 +88,7 @@ def rollout(model, x0, us, p):
     lead = np.broadcast_shapes(*shapes)
     U = np.ascontiguousarray(np.broadcast_to(us, lead + (t, nu)).reshape(_count(lead), t, nu))
     P = None if p is None else _flatten(p, lead, np_)
-    out = _ukemi._flat_rollout(model, _flatten(x0, lead, nx), U, P)
+    out = _ukemi._flat_rollout(model, _flatten(x0, lead, nx), U, P, keep)
     return out.reshape(lead + (t + 1, nx))
 
 

@@ -223,26 +223,26 @@ def _rollout_fn(model, kappa, with_params, how):
     if how == "ffi":
         h = _handle(model)
 
-        def call_fwd(x0, us, p):
+        def call_fwd(x0, us, p, keep=False):
             return jax.ffi.ffi_call("ukemi_flat_rollout", out_shape(x0, us),
                                     vmap_method="broadcast_all")(
-                h, x0, us, p, with_params=np.int32(with_params))
+                h, x0, us, p, with_params=np.int32(with_params), keep=np.int32(keep))
 
         def call_bwd(x0, us, p, g):
             return jax.ffi.ffi_call("ukemi_flat_rollout_vjp", _f64s(x0.shape, us.shape, p.shape),
                                     vmap_method="broadcast_all")(
                 h, x0, us, p, g, with_params=np.int32(with_params), kappa_grad=_kappa_attr(kappa))
     else:
-        def fwd_cb(x0, us, p):
-            return _flat.rollout(model, x0, us, p if with_params else None)
+        def fwd_cb(x0, us, p, keep=False):
+            return _flat.rollout(model, x0, us, p if with_params else None, keep)
 
         def bwd_cb(x0, us, p, g):
             gx, gu, gp = _flat.rollout_vjp(model, x0, us, p if with_params else None, g, kappa)
             return gx, gu, (gp if with_params else np.zeros(np.shape(p)))
 
-        def call_fwd(x0, us, p):
-            return jax.pure_callback(fwd_cb, out_shape(x0, us), x0, us, p,
-                                     vmap_method="broadcast_all")
+        def call_fwd(x0, us, p, keep=False):
+            return jax.pure_callback(functools.partial(fwd_cb, keep=keep), out_shape(x0, us),
+                                     x0, us, p, vmap_method="broadcast_all")
 
         def call_bwd(x0, us, p, g):
             return jax.pure_callback(bwd_cb, _f64s(x0.shape, us.shape, p.shape), x0, us, p, g,
@@ -253,7 +253,9 @@ def _rollout_fn(model, kappa, with_params, how):
         return call_fwd(x0, us, p)
 
     def f_fwd(x0, us, p):
-        return call_fwd(x0, us, p), (x0, us, p)
+        # differentiated: the engine keeps this forward pass for `call_bwd` with the same
+        # inputs, which then linearises the stored steps instead of solving them again
+        return call_fwd(x0, us, p, keep=True), (x0, us, p)
 
     def f_bwd(res, g):
         return tuple(call_bwd(*res, g))

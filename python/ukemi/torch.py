@@ -71,13 +71,14 @@ def _(key, kappa, x, u, p, g, with_params):
 
 @torch.library.custom_op("ukemi::flat_rollout", mutates_args=())
 def _rollout_op(key: int, x0: torch.Tensor, us: torch.Tensor, p: torch.Tensor,
-                with_params: bool) -> torch.Tensor:
+                with_params: bool, keep: bool = False) -> torch.Tensor:
     model = _MODELS[key]
-    return _back(_flat.rollout(model, _np(x0), _np(us), _np(p) if with_params else None), x0)
+    return _back(_flat.rollout(model, _np(x0), _np(us), _np(p) if with_params else None, keep),
+                 x0)
 
 
 @_rollout_op.register_fake
-def _(key, x0, us, p, with_params):
+def _(key, x0, us, p, with_params, keep=False):
     shapes = [x0.shape[:-1], us.shape[:-2]] + ([p.shape[:-1]] if with_params else [])
     return x0.new_empty(torch.broadcast_shapes(*shapes) + (us.shape[-2] + 1, x0.shape[-1]))
 
@@ -120,9 +121,9 @@ def _(info, in_dims, key, kappa, x, u, p, g, with_params):
 
 
 @_rollout_op.register_vmap
-def _(info, in_dims, key, x0, us, p, with_params):
+def _(info, in_dims, key, x0, us, p, with_params, keep=False):
     x0, us, p = _batched(info, in_dims[1:4], (x0, us, p))
-    return _rollout_op(key, x0, us, p, with_params), 0
+    return _rollout_op(key, x0, us, p, with_params, keep), 0
 
 
 @_rollout_vjp_op.register_vmap
@@ -157,12 +158,13 @@ class _Rollout(torch.autograd.Function):
     generate_vmap_rule = True
 
     @staticmethod
-    def forward(x0, us, p, key, kappa, with_params):
-        return _rollout_op(key, x0, us, p, with_params)
+    def forward(x0, us, p, key, kappa, with_params, keep):
+        # `keep`: a backward pass will follow, so the engine keeps this forward pass for it
+        return _rollout_op(key, x0, us, p, with_params, keep)
 
     @staticmethod
     def setup_context(ctx, inputs, output):
-        x0, us, p, key, kappa, with_params = inputs
+        x0, us, p, key, kappa, with_params, keep = inputs
         ctx.save_for_backward(x0, us, p)
         ctx.meta = (key, kappa, with_params)
 
@@ -172,7 +174,7 @@ class _Rollout(torch.autograd.Function):
         x0, us, p = ctx.saved_tensors
         key, kappa, with_params = ctx.meta
         gx, gu, gp = _rollout_vjp_op(key, kappa, x0, us, p, g.contiguous(), with_params)
-        return gx, gu, gp, None, None, None
+        return gx, gu, gp, None, None, None, None
 
 
 def _check_dtype(name, t):
@@ -206,7 +208,8 @@ def rollout(model, x0: torch.Tensor, us: torch.Tensor, params: torch.Tensor | No
     """A differentiable rollout: ``x0`` (..., nq + nv), ``us`` (..., T, nu) → (..., T + 1, nq + nv)
     in one Rust call; the backward pass is the engine's reverse sweep."""
     u, p, key, k, wp = _args(model, x0, us, params, kappa_grad, (0, model.nu))
-    return _Rollout.apply(x0, u, p, key, k, wp)
+    keep = torch.is_grad_enabled() and any(t.requires_grad for t in (x0, u, p))
+    return _Rollout.apply(x0, u, p, key, k, wp, keep)
 
 
 def step_jacobians(model, x: torch.Tensor, u: torch.Tensor | None = None,

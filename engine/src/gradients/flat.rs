@@ -7,7 +7,7 @@
 //! environments step full states instead ([`crate::batch`]).
 use rayon::prelude::*;
 
-use super::rollout::{advance, rollout_vjp_with};
+use super::rollout::{advance, rollout_vjp_kept};
 use super::tangent::{
     Coordinates, qpos_adjoint_from_tangent, qpos_raw_from_tangent, qpos_tangent_from_raw,
     tangent_adjoint_from_qpos,
@@ -152,12 +152,37 @@ pub fn step_jacobians(
 
 /// A rollout of `nstep` steps from flat `x0`: `(T+1, nq+nv)` row-major.
 pub fn rollout(model: &Model, x0: &[f64], us: &[f64], nstep: usize) -> Result<Vec<f64>> {
+    rollout_kept(model, x0, us, nstep, false)
+}
+
+/// [`rollout`]; with `keep`, its forward pass is kept ([`super::kept`]) for the
+/// [`rollout_vjp`] with the same model and inputs that differentiation will call next, which
+/// then solves no step again. The states are the same bits either way.
+pub fn rollout_kept(
+    model: &Model,
+    x0: &[f64],
+    us: &[f64],
+    nstep: usize,
+    keep: bool,
+) -> Result<Vec<f64>> {
     let nu = model.nu();
     ensure!(
         us.len() == nstep * nu,
         Error::shape("us", &[nstep, nu], &[us.len() / nu.max(1), nu])
     );
     let n = nx(model);
+    if keep {
+        let s0 = state_of(model, x0)?;
+        let (states, solutions, _) =
+            super::rollout::forward_stored(model, s0, us, nstep, Coordinates::Minimal)?;
+        let mut out = vec![0.0; (nstep + 1) * n];
+        for (s, o) in states.iter().zip(out.chunks_exact_mut(n)) {
+            flat_of(model, s, o);
+        }
+        let key = super::kept::Key::new(model, x0, us);
+        super::kept::keep(key, super::kept::Forward { states, solutions });
+        return Ok(out);
+    }
     let mut out = vec![0.0; (nstep + 1) * n];
     let mut s = state_of(model, x0)?;
     let mut ws = Recycled::new(Workspace::pooled(model));
@@ -192,6 +217,7 @@ pub fn rollout_vjp(
         Error::shape("adjoint_xs", &[nstep + 1, n], &[adj_xs.len() / n, n])
     );
     let s0 = state_of(model, x0)?;
+    let kept = super::kept::take(&super::kept::Key::new(model, x0, us));
     let adjoint = |k: usize, s: &State, out: &mut [f64]| {
         let mut q = vec![0.0; nq];
         qpos_into(model, s, &mut q);
@@ -199,7 +225,7 @@ pub fn rollout_vjp(
         tangent_adjoint_from_qpos(model, &q, &a[..nq], &mut out[..nv]);
         out[nv..].copy_from_slice(&a[nq..]);
     };
-    let (adj, _) = rollout_vjp_with(
+    let (adj, _) = rollout_vjp_kept(
         model,
         &s0,
         us,
@@ -208,6 +234,7 @@ pub fn rollout_vjp(
         kappa_grad,
         with_params,
         &adjoint,
+        kept,
     )?;
     let mut adj_x = vec![0.0; n];
     qpos_adjoint_from_tangent(model, &x0[..nq], &adj.state0[..nv], &mut adj_x[..nq]);

@@ -36,6 +36,7 @@
 //! is non-zero only on its support, so a Jacobian is formed from `min(ny, nz)` solves (transposed
 //! when there are fewer outputs than inputs) and sparse products.
 pub mod flat;
+pub mod kept;
 mod partials;
 mod rollout;
 mod sparsity;
@@ -285,11 +286,28 @@ impl StoredSolution {
     }
 }
 
+impl StoredSolution {
+    /// Bytes of its arrays.
+    pub(crate) fn heap_bytes(&self) -> usize {
+        8 * self.w.len() + self.active.len() + 24 * self.saturated.len()
+    }
+}
+
 /// What a forward pass keeps of a step: its solution, or each sub-step's when it was subdivided.
 #[derive(Clone, Debug)]
 pub(crate) enum StoredStep {
     Whole(StoredSolution),
     Substeps(StoredSubsteps),
+}
+
+impl StoredStep {
+    /// Bytes of its arrays.
+    pub(crate) fn heap_bytes(&self) -> usize {
+        match self {
+            StoredStep::Whole(s) => s.heap_bytes(),
+            StoredStep::Substeps(s) => s.heap_bytes(),
+        }
+    }
 }
 
 fn check_kappa(kappa_grad: Option<f64>) -> Result<()> {

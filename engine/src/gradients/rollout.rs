@@ -12,6 +12,7 @@ use std::sync::OnceLock;
 
 use nalgebra::{DMatrix, DVector};
 
+use super::kept::Forward;
 use super::tangent::{Coordinates, Point};
 use super::{Adjoints, Jacobians, Linearization, StoredStep, Wrt, flat, substeps};
 use crate::model::Model;
@@ -154,8 +155,9 @@ fn spare_thread() -> bool {
 /// step from the state the rollout reached), and the states `x_0..=x_T`.
 #[derive(Clone, Debug)]
 pub struct RolloutJacobians {
-    /// `x_0..=x_T` (in minimal coordinates each state is rebuilt from `(qpos, qvel)` first,
-    /// as [`rollout_vjp`] does, so the rollout is `x_{k+1} = F(x_k, u_k)` exactly).
+    /// `x_0..=x_T`: the given state, then each step's next state (in minimal coordinates
+    /// every step rebuilds its start from `(qpos, qvel)` first, as [`rollout_vjp`] and
+    /// [`Linearization::new`] do, so the rollout is `x_{k+1} = F(x_k, u_k)` exactly).
     pub states: Vec<State>,
     /// The Jacobians of step `k`, `∂x_{k+1}/∂(x_k, u_k, θ)`.
     pub steps: Vec<Jacobians>,
@@ -206,7 +208,8 @@ fn rollout_jacobians_sweep(
     );
     state.check_model(model)?;
     super::check_kappa(kappa_grad)?;
-    let state0 = Point::new(model, state, coords)?.state;
+    // (each step rebuilds its start in `coords` itself; see `rollout_vjp_sweep`)
+    let state0 = state.clone();
     let (states, steps) = if overlapped {
         flat::in_pool(|| forward_overlapped(model, state0, ctrls, nstep, coords, wrt, kappa_grad))?
     } else {
@@ -255,14 +258,7 @@ pub(crate) fn rollout_vjp_with(
     with_params: bool,
     adjoint: &dyn Fn(usize, &State, &mut [f64]),
 ) -> Result<(RolloutAdjoint, Vec<State>)> {
-    let (nu, ny) = (model.nu(), coords.dim(model));
-    let np = if with_params {
-        model.param_layout().len()
-    } else {
-        0
-    };
-    let sweep = Sweep::choose(nstep, ny, ny + nu + np);
-    rollout_vjp_sweep(
+    rollout_vjp_kept(
         model,
         state,
         ctrls,
@@ -271,7 +267,34 @@ pub(crate) fn rollout_vjp_with(
         kappa_grad,
         with_params,
         adjoint,
-        sweep,
+        None,
+    )
+}
+
+/// [`rollout_vjp_with`] from a kept forward pass when there is one (its states and solutions
+/// from the same inputs, see [`super::kept`]).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn rollout_vjp_kept(
+    model: &Model,
+    state: &State,
+    ctrls: &[f64],
+    nstep: usize,
+    coords: Coordinates,
+    kappa_grad: Option<f64>,
+    with_params: bool,
+    adjoint: &dyn Fn(usize, &State, &mut [f64]),
+    kept: Option<Forward>,
+) -> Result<(RolloutAdjoint, Vec<State>)> {
+    let (nu, ny) = (model.nu(), coords.dim(model));
+    let np = if with_params {
+        model.param_layout().len()
+    } else {
+        0
+    };
+    let sweep = Sweep::choose(nstep, ny, ny + nu + np);
+    let args = (kappa_grad, with_params, adjoint);
+    rollout_vjp_sweep(
+        model, state, ctrls, nstep, coords, args.0, args.1, args.2, sweep, kept,
     )
 }
 
@@ -287,8 +310,9 @@ pub(crate) fn rollout_vjp_sweep(
     with_params: bool,
     adjoint: &dyn Fn(usize, &State, &mut [f64]),
     sweep: Sweep,
+    kept: Option<Forward>,
 ) -> Result<(RolloutAdjoint, Vec<State>)> {
-    let (nu, ny) = (model.nu(), coords.dim(model));
+    let nu = model.nu();
     ensure!(
         ctrls.len() == nstep * nu,
         Error::shape("ctrls", &[nstep, nu], &[ctrls.len() / nu.max(1), nu])
@@ -299,13 +323,31 @@ pub(crate) fn rollout_vjp_sweep(
         ctrl: true,
         params: with_params,
     };
-    let state0 = Point::new(model, state, coords)?.state;
     let np = if with_params {
         model.param_layout().len()
     } else {
         0
     };
-    let (states, mut reverse) = match sweep {
+    if let Some(f) = kept {
+        // the forward pass was kept ([`super::kept`]): only the linearisations are left
+        ensure!(
+            f.states.len() == nstep + 1 && f.solutions.len() == nstep,
+            Error::shape("kept rollout", &[nstep], &[f.solutions.len()])
+        );
+        let reverse = match sweep {
+            Sweep::Overlapped => Reverse::Jacobians(flat::in_pool(|| {
+                linearise_all(model, &f, ctrls, coords, wrt, kappa_grad)
+            })),
+            Sweep::Sequential => Reverse::Stored(f.solutions, None),
+        };
+        let how = (wrt, kappa_grad);
+        return reverse_sweep(model, ctrls, coords, how, np, adjoint, f.states, reverse);
+    }
+    // (each step rebuilds its start in `coords` itself, as `flat::rollout` does: rebuilding
+    // here too would start the rollout from a state a rounding away from the forward pass's,
+    // and a chaotic rollout then ends elsewhere)
+    let state0 = state.clone();
+    let (states, reverse) = match sweep {
         Sweep::Overlapped => {
             let (states, jacobians) = flat::in_pool(|| {
                 forward_overlapped(model, state0, ctrls, nstep, coords, wrt, kappa_grad)
@@ -317,6 +359,58 @@ pub(crate) fn rollout_vjp_sweep(
             (states, Reverse::Stored(solutions, Some(Box::new(ws))))
         }
     };
+    reverse_sweep(
+        model,
+        ctrls,
+        coords,
+        (wrt, kappa_grad),
+        np,
+        adjoint,
+        states,
+        reverse,
+    )
+}
+
+/// Every step of a kept forward pass linearised on the thread pool, its Jacobians formed.
+fn linearise_all(
+    model: &Model,
+    f: &Forward,
+    ctrls: &[f64],
+    coords: Coordinates,
+    wrt: Wrt,
+    kappa_grad: Option<f64>,
+) -> Vec<StepJacobians> {
+    use rayon::prelude::*;
+    let nu = model.nu();
+    (0..f.solutions.len())
+        .into_par_iter()
+        .map(|k| {
+            let u = &ctrls[k * nu..(k + 1) * nu];
+            let ws = Workspace::pooled(model);
+            let x = &f.states[k];
+            let stored = &f.solutions[k];
+            Some(
+                Linearization::from_stored(model, x, u, coords, wrt, kappa_grad, stored, ws)
+                    .and_then(|mut lin| lin.jacobians(model)),
+            )
+        })
+        .collect()
+}
+
+/// The reverse sweep over the states `x_0..=x_T` of a forward pass, each step's linearisation
+/// given by `reverse`.
+#[allow(clippy::too_many_arguments)]
+fn reverse_sweep(
+    model: &Model,
+    ctrls: &[f64],
+    coords: Coordinates,
+    (wrt, kappa_grad): (Wrt, Option<f64>),
+    np: usize,
+    adjoint: &dyn Fn(usize, &State, &mut [f64]),
+    states: Vec<State>,
+    mut reverse: Reverse,
+) -> Result<(RolloutAdjoint, Vec<State>)> {
+    let (nu, ny, nstep) = (model.nu(), coords.dim(model), states.len() - 1);
     let mut adj = vec![0.0; ny];
     let mut loss_adj = vec![0.0; ny];
     adjoint(nstep, &states[nstep], &mut adj);
@@ -400,7 +494,7 @@ fn transposed_products(jac: &Jacobians, adj_next: &[f64]) -> Result<Adjoints> {
 
 /// The forward pass alone: the states `x_0..=x_T`, each step's stored solution and the
 /// workspace (for the reverse sweep to reuse).
-fn forward_stored(
+pub(super) fn forward_stored(
     model: &Model,
     state0: State,
     ctrls: &[f64],
@@ -508,7 +602,7 @@ mod tests {
             }
         };
         let c = Coordinates::Minimal;
-        rollout_vjp_sweep(m, s, &ctrls, t, c, kappa, true, &adj, how).map(|(r, _)| r)
+        rollout_vjp_sweep(m, s, &ctrls, t, c, kappa, true, &adj, how, None).map(|(r, _)| r)
     }
 
     /// Both sweeps give the same adjoints (the overlapped one multiplies each step's
@@ -600,7 +694,7 @@ mod tests {
         };
         for how in [Sweep::Sequential, Sweep::Overlapped] {
             let c = Coordinates::Minimal;
-            let err = rollout_vjp_sweep(&m, &s, &ctrls, 10, c, None, false, &bad, how)
+            let err = rollout_vjp_sweep(&m, &s, &ctrls, 10, c, None, false, &bad, how, None)
                 .err()
                 .map(|e| e.to_string())
                 .unwrap_or_default();

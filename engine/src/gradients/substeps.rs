@@ -51,6 +51,13 @@ pub(crate) struct StoredSubsteps {
 }
 
 impl StoredSubsteps {
+    /// Bytes of its arrays.
+    pub(crate) fn heap_bytes(&self) -> usize {
+        let starts: usize = self.starts.iter().map(State::heap_bytes).sum();
+        let sols: usize = self.solutions.iter().map(StoredSolution::heap_bytes).sum();
+        starts + sols + self.next.heap_bytes()
+    }
+
     /// The state the step ends in (what [`crate::step`] returns).
     pub(crate) fn next(&self) -> &State {
         &self.next

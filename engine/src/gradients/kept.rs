@@ -1,0 +1,232 @@
+//! Forward rollouts kept for the reverse sweep that follows them.
+//!
+//! Under differentiation JAX and torch call a rollout and later its VJP with the same inputs
+//! (`x0`, `us`, the model); the VJP's own forward pass would solve every step again. A rollout
+//! made with `keep` stores its states and solutions here under those inputs, bit for bit, and
+//! [`take`] hands them to the VJP, which then only linearises (all steps at once on the thread
+//! pool). At most [`BUDGET`] bytes are held; the oldest rollouts go first.
+use std::collections::VecDeque;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use super::StoredStep;
+use crate::model::Model;
+use crate::model::Options;
+use crate::state::State;
+
+/// Most bytes of kept rollouts: a 1000-step rollout of the shared A1 is 0.16 GB (every contact
+/// candidate's interior-point variables, in each state and each solution), of the humanoid
+/// 0.03 GB, of the Panda 0.13 GB (measured with `_kept_rollouts`).
+pub(crate) const BUDGET: usize = 256 << 20;
+
+/// A forward pass: the states `x_0..=x_T` and each step's stored solution.
+pub(crate) struct Forward {
+    pub states: Vec<State>,
+    pub solutions: Vec<StoredStep>,
+}
+
+impl Forward {
+    fn bytes(&self) -> usize {
+        let s: usize = self.states.iter().map(State::heap_bytes).sum();
+        s + self
+            .solutions
+            .iter()
+            .map(StoredStep::heap_bytes)
+            .sum::<usize>()
+    }
+}
+
+/// The inputs a rollout's result depends on, compared bit for bit: the model (its structure by
+/// [`Model::topology_id`], which only [`Model::with_params`] and [`Model::with_options`] keep
+/// while changing anything, hence its parameters and options), `x0` and `us`.
+#[derive(PartialEq)]
+pub(crate) struct Key {
+    topology: u64,
+    options: Options,
+    params: Vec<u64>,
+    x0: Vec<u64>,
+    us: Vec<u64>,
+}
+
+impl Key {
+    pub(crate) fn new(model: &Model, x0: &[f64], us: &[f64]) -> Key {
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect();
+        Key {
+            topology: model.topology_id(),
+            options: model.options.clone(),
+            params: bits(&model.params()),
+            x0: bits(x0),
+            us: bits(us),
+        }
+    }
+}
+
+struct Kept {
+    entries: VecDeque<(Key, Forward, usize)>,
+    bytes: usize,
+}
+
+static KEPT: Mutex<Kept> = Mutex::new(Kept {
+    entries: VecDeque::new(),
+    bytes: 0,
+});
+static HITS: AtomicUsize = AtomicUsize::new(0);
+static MISSES: AtomicUsize = AtomicUsize::new(0);
+
+fn with<R>(f: impl FnOnce(&mut Kept) -> R) -> R {
+    // a panic while holding the lock leaves nothing half-done worth refusing
+    let mut g = KEPT
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    f(&mut g)
+}
+
+/// Keep `forward` under `key` (not if it alone exceeds the budget), dropping the oldest
+/// rollouts beyond the budget.
+pub(crate) fn keep(key: Key, forward: Forward) {
+    let bytes = forward.bytes();
+    if bytes > BUDGET {
+        return;
+    }
+    let dropped = with(|k| {
+        let mut dropped = Vec::new();
+        while k.bytes + bytes > BUDGET {
+            let Some(old) = k.entries.pop_front() else {
+                break;
+            };
+            k.bytes -= old.2;
+            dropped.push(old);
+        }
+        k.entries.push_back((key, forward, bytes));
+        k.bytes += bytes;
+        dropped
+    });
+    drop(dropped); // freed outside the lock
+}
+
+/// The rollout kept under `key`, removed from the store (a VJP consumes its forward pass).
+pub(crate) fn take(key: &Key) -> Option<Forward> {
+    let found = with(|k| {
+        let i = k.entries.iter().position(|(kk, _, _)| kk == key)?;
+        let (_, forward, bytes) = k.entries.remove(i)?;
+        k.bytes -= bytes;
+        Some(forward)
+    });
+    let counter = if found.is_some() { &HITS } else { &MISSES };
+    counter.fetch_add(1, Ordering::Relaxed);
+    found
+}
+
+/// `(hits, misses, rollouts kept, bytes kept)` since the process started (for tests and
+/// profiling).
+pub fn stats() -> (usize, usize, usize, usize) {
+    let (n, bytes) = with(|k| (k.entries.len(), k.bytes));
+    (
+        HITS.load(Ordering::Relaxed),
+        MISSES.load(Ordering::Relaxed),
+        n,
+        bytes,
+    )
+}
+
+/// Drop every kept rollout.
+pub fn clear() {
+    let entries = with(|k| {
+        k.bytes = 0;
+        std::mem::take(&mut k.entries)
+    });
+    drop(entries);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::flat;
+    use super::*;
+    use crate::{ActuatorSpec, BodySpec, GeomSpec, JointKind, JointSpec, ModelBuilder, Shape};
+
+    /// A box on the floor pushed along x (sticks, slides, stops): `(model, x0, us)` of 25 steps.
+    fn pushed_box() -> (Model, Vec<f64>, Vec<f64>) {
+        let half = nalgebra::Vector3::new(0.05, 0.05, 0.05);
+        let m = ModelBuilder::new()
+            .timestep(0.01)
+            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.5))
+            .body(BodySpec::new("box", 1.0, [1.0 / 600.0; 3]).pos([0.0, 0.0, 0.05]))
+            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
+            .geom(GeomSpec::new("box", "box", Shape::Box { half_extents: half }).friction(0.5))
+            .actuator(ActuatorSpec::motor("push", "free", 0, 1.0))
+            .compile()
+            .unwrap();
+        // at rest on the floor: qpos (position, quaternion), qvel; settled for 20 steps
+        let mut x0 = vec![0.0; flat::nx(&m)];
+        x0[..4].copy_from_slice(&[0.0, 0.0, 0.05, 1.0]);
+        let settled = flat::rollout(&m, &x0, &[0.0; 20], 20).unwrap();
+        let x0 = settled[20 * x0.len()..].to_vec();
+        let us = (0..25).map(|k| 8.0 * (k as f64 * 0.3).sin()).collect();
+        (m, x0, us)
+    }
+
+    /// A kept rollout returns the same states, and the VJP that takes it gives the adjoints
+    /// the VJP that solves the rollout again gives (the same bits: the same steps solved the
+    /// same way), on one thread or two.
+    #[test]
+    fn a_kept_rollout_gives_the_same_states_and_adjoints() {
+        let (m, x0, us) = pushed_box();
+        let n = flat::nx(&m);
+        let g: Vec<f64> = (0..26 * n).map(|i| (i as f64 * 0.37).cos()).collect();
+        let plain = flat::rollout(&m, &x0, &us, 25).unwrap();
+        let fresh = flat::rollout_vjp(&m, &x0, &us, 25, &g, Some(1e-4), true).unwrap();
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        for pool in [None, Some(&one)] {
+            let kept = flat::rollout_kept(&m, &x0, &us, 25, true).unwrap();
+            assert!(
+                kept.iter()
+                    .zip(&plain)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+            let hits = stats().0;
+            let vjp = || flat::rollout_vjp(&m, &x0, &us, 25, &g, Some(1e-4), true).unwrap();
+            let r = match pool {
+                Some(p) => p.install(vjp),
+                None => vjp(),
+            };
+            assert!(stats().0 > hits, "the VJP took the kept rollout");
+            for (a, b) in [(&r.0, &fresh.0), (&r.1, &fresh.1), (&r.2, &fresh.2)] {
+                let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                let diff = a
+                    .iter()
+                    .zip(b)
+                    .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                assert!(diff <= 1e-12 * scale, "{diff:e} of {scale:e}");
+            }
+        }
+    }
+
+    /// Other inputs or another model do not take a kept rollout; `take` removes it.
+    #[test]
+    fn a_kept_rollout_is_taken_only_with_its_inputs() {
+        let (m, x0, us) = pushed_box();
+        flat::rollout_kept(&m, &x0, &us, 25, true).unwrap();
+        let mut other = us.clone();
+        other[3] += 1e-12;
+        assert!(take(&Key::new(&m, &x0, &other)).is_none());
+        let heavier = {
+            let mut p = m.params();
+            p[0] *= 2.0;
+            m.with_params(&p).unwrap()
+        };
+        assert!(take(&Key::new(&heavier, &x0, &us)).is_none());
+        let looser = m
+            .with_options(crate::Options {
+                rtol: 1e-6,
+                ..m.options.clone()
+            })
+            .unwrap();
+        assert!(take(&Key::new(&looser, &x0, &us)).is_none());
+        let f = take(&Key::new(&m, &x0, &us)).expect("kept");
+        assert_eq!((f.states.len(), f.solutions.len()), (26, 25));
+        assert!(take(&Key::new(&m, &x0, &us)).is_none(), "taken once");
+    }
+}
