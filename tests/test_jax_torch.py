@@ -141,6 +141,47 @@ def test_differentiated_rollouts_keep_their_forward_pass_for_the_backward(how):
     np.testing.assert_allclose(ut.grad.numpy(), ref[1], rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("how", ["ffi", "callback"])
+def test_differentiated_steps_keep_their_solve_for_the_backward(how):
+    # a scan of steps under jax.grad: each step's VJP takes the solve its forward pass kept
+    m = ball_on_floor()
+    x = np.concatenate([m.make_state().qpos, [0.5, 0.0, -0.3, 0, 0, 0]])
+    us = 0.4 * np.sin(np.arange(6))[:, None]
+    w = _weights(x.size)
+
+    def loss(x, us):
+        def body(x, u):
+            x = ujax.step(m, x, u, kappa_grad=1e-4)
+            return x, jnp.sum(w * x)
+        return jnp.sum(jax.lax.scan(body, x, us)[1])
+
+    ujax.set_backend(how)
+    try:
+        h0, _, n0 = _kept()
+        gx, gu = jax.jit(jax.grad(loss, argnums=(0, 1)))(jnp.asarray(x), jnp.asarray(us))
+        h1, _, n1 = _kept()
+        assert h1 == h0 + len(us) and n1 == n0  # every step kept, then taken
+    finally:
+        ujax.set_backend("auto")
+    # the same gradient from fresh solves: chained flat step VJPs
+    xs = [x]
+    for u in us:
+        xs.append(ukemi._flat.step(m, xs[-1], u, None))
+    lam, gu_ref = np.zeros_like(x), np.zeros_like(us)
+    for k in reversed(range(len(us))):
+        gxk, guk, _ = ukemi._flat.step_vjp(m, xs[k], us[k], None, lam + w, 1e-4)
+        lam, gu_ref[k] = gxk, guk
+    np.testing.assert_allclose(gx, lam, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(gu, gu_ref, rtol=1e-10, atol=1e-12)
+    # torch keeps a step only when a gradient is wanted
+    xt = torch.tensor(x, requires_grad=True)
+    with torch.no_grad():
+        utorch.step(m, xt, torch.tensor(us[0]), kappa_grad=1e-4)
+    assert _kept()[2] == n1
+    utorch.step(m, xt, torch.tensor(us[0]), kappa_grad=1e-4).sum().backward()
+    assert _kept()[0] == h1 + 1 and _kept()[2] == n1
+
+
 def test_jax_vmap_grad_over_a_batch():
     m = arm()
     xs = np.stack([x0_of(m, s) for s in (0.1, 0.5, 1.0)])

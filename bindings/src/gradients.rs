@@ -350,13 +350,14 @@ fn slice2<'a>(a: &'a Option<PyReadonlyArray2<'_, f64>>) -> PyResult<Option<&'a [
 
 /// Batched flat steps: `xs (B, nq+nv)`, `us (B, nu)`, optional `params (B, nparams)`.
 #[pyfunction]
-#[pyo3(name = "_flat_step", signature = (model, xs, us, params=None))]
+#[pyo3(name = "_flat_step", signature = (model, xs, us, params=None, keep=false))]
 pub fn flat_step<'py>(
     py: Python<'py>,
     model: &PyModel,
     xs: PyReadonlyArray2<'py, f64>,
     us: PyReadonlyArray2<'py, f64>,
     params: Option<PyReadonlyArray2<'py, f64>>,
+    keep: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     guard(|| {
         let (b, n, nu) = (xs.shape()[0], xs.shape()[1], us.shape()[1]);
@@ -368,7 +369,8 @@ pub fn flat_step<'py>(
             .detach(|| {
                 let models = models_for(&m, p, b)?;
                 flat::batched(&models, b, |mm, i| {
-                    flat::step(mm, &xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu])
+                    let (x, u) = (&xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu]);
+                    flat::step_kept(mm, x, u, keep)
                 })
             })
             .py()?;

@@ -10,8 +10,8 @@
 //! (identical for every argument; the Python layer broadcasts them), flattened and run in
 //! parallel with rayon ([`flat::batched`]). Attributes: `with_params` (integer/bool scalar),
 //! for the VJPs `kappa_grad` (f64; negative or NaN means `None`, the exact gradient), and for
-//! the rollout `keep` (integer/bool: keep the forward pass for the VJP that follows under
-//! differentiation, `ukemi_engine::gradients::kept`).
+//! the step and the rollout the optional `keep` (integer/bool, default 0: keep the forward pass
+//! for the VJP that follows under differentiation, `ukemi_engine::gradients::kept`).
 //!
 //! | target                  | arguments                           | results                     |
 //! |-------------------------|-------------------------------------|-----------------------------|
@@ -483,6 +483,11 @@ impl<'a> Frame<'a> {
 
     /// A scalar attribute by name, as f64 (any float, integer or bool dtype).
     fn scalar(&self, name: &str) -> HResult<f64> {
+        self.scalar_or(name, None)
+    }
+
+    /// The scalar attribute `name`, or `default` when it is absent (`None`: an error).
+    fn scalar_or(&self, name: &str, default: Option<f64>) -> HResult<f64> {
         let a = &self.raw.attrs;
         for i in 0..a.size.max(0) as usize {
             // SAFETY: `size` entries of types/names/attrs; names are byte spans.
@@ -514,11 +519,16 @@ impl<'a> Frame<'a> {
                 };
             }
         }
-        Err(Fail::arg(format!("missing attribute `{name}`")))
+        default.ok_or_else(|| Fail::arg(format!("missing attribute `{name}`")))
     }
 
     fn flag(&self, name: &str) -> HResult<bool> {
         Ok(self.scalar(name)? != 0.0)
+    }
+
+    /// An optional flag attribute (false when absent).
+    fn optional_flag(&self, name: &str) -> HResult<bool> {
+        Ok(self.scalar_or(name, Some(0.0))? != 0.0)
     }
 
     /// `kappa_grad`: negative or NaN means exact gradients (`None`).
@@ -593,6 +603,8 @@ fn step_impl(f: &Frame) -> HResult<()> {
     f.counts(4, 1)?;
     let m = f.model()?;
     let with_params = f.flag("with_params")?;
+    // under differentiation: keep the solved step for the VJP (`ukemi_engine::gradients::kept`)
+    let keep = f.optional_flag("keep")?;
     let (n, nu, np) = (flat::nx(&m), m.nu(), m.params().len());
     let x = f.arg(1, "x")?;
     let lead = x.lead(&[Some(n)])?;
@@ -608,7 +620,7 @@ fn step_impl(f: &Frame) -> HResult<()> {
     let out = out.f64s_mut()?;
     let b = batch_of(lead);
     let res = run_batch(&m, with_params.then_some(ps), b, |mm, i| {
-        flat::step(mm, &xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu])
+        flat::step_kept(mm, &xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu], keep)
     })?;
     scatter(out, res, n);
     Ok(())
@@ -701,7 +713,7 @@ fn rollout_impl(f: &Frame) -> HResult<()> {
     let m = f.model()?;
     let with_params = f.flag("with_params")?;
     // under differentiation: keep the forward pass for the VJP (`ukemi_engine::gradients::kept`)
-    let keep = f.flag("keep")?;
+    let keep = f.optional_flag("keep")?;
     let (n, nu, np) = (flat::nx(&m), m.nu(), m.params().len());
     let x0 = f.arg(1, "x0")?;
     let lead = x0.lead(&[Some(n)])?;

@@ -43,7 +43,9 @@ def unbroadcast(g, shape):
     return g.reshape(shape)
 
 
-def step(model, x, u, p):
+def step(model, x, u, p, keep=False):
+    """Steps; ``keep`` keeps each solved step in Rust for the ``step_vjp`` with the same inputs
+    that differentiation calls next (it then does not solve the step again)."""
     nx, nu, np_ = sizes(model)
     x, u = np.asarray(x, np.float64), np.asarray(u, np.float64)
     shapes = [_lead("x", x, nx), _lead("u", u, nu)]
@@ -52,7 +54,7 @@ def step(model, x, u, p):
         shapes.append(_lead("params", p, np_))
     lead = np.broadcast_shapes(*shapes)
     P = None if p is None else _flatten(p, lead, np_)
-    out = _ukemi._flat_step(model, _flatten(x, lead, nx), _flatten(u, lead, nu), P)
+    out = _ukemi._flat_step(model, _flatten(x, lead, nx), _flatten(u, lead, nu), P, keep)
     return out.reshape(lead + (nx,))
 
 

@@ -173,26 +173,26 @@ def _step_fn(model, kappa, with_params, how):
     if how == "ffi":
         h = _handle(model)
 
-        def call_fwd(x, u, p):
+        def call_fwd(x, u, p, keep=False):
             return jax.ffi.ffi_call("ukemi_flat_step", _f64s(x.shape)[0],
                                     vmap_method="broadcast_all")(
-                h, x, u, p, with_params=np.int32(with_params))
+                h, x, u, p, with_params=np.int32(with_params), keep=np.int32(keep))
 
         def call_bwd(x, u, p, g):
             return jax.ffi.ffi_call("ukemi_flat_step_vjp", _f64s(x.shape, u.shape, p.shape),
                                     vmap_method="broadcast_all")(
                 h, x, u, p, g, with_params=np.int32(with_params), kappa_grad=_kappa_attr(kappa))
     else:
-        def fwd_cb(x, u, p):
-            return _flat.step(model, x, u, p if with_params else None)
+        def fwd_cb(x, u, p, keep=False):
+            return _flat.step(model, x, u, p if with_params else None, keep)
 
         def bwd_cb(x, u, p, g):
             gx, gu, gp = _flat.step_vjp(model, x, u, p if with_params else None, g, kappa)
             return gx, gu, (gp if with_params else np.zeros(np.shape(p)))
 
-        def call_fwd(x, u, p):
-            return jax.pure_callback(fwd_cb, _f64s(x.shape)[0], x, u, p,
-                                     vmap_method="broadcast_all")
+        def call_fwd(x, u, p, keep=False):
+            return jax.pure_callback(functools.partial(fwd_cb, keep=keep), _f64s(x.shape)[0],
+                                     x, u, p, vmap_method="broadcast_all")
 
         def call_bwd(x, u, p, g):
             return jax.pure_callback(bwd_cb, _f64s(x.shape, u.shape, p.shape), x, u, p, g,
@@ -203,7 +203,8 @@ def _step_fn(model, kappa, with_params, how):
         return call_fwd(x, u, p)
 
     def f_fwd(x, u, p):
-        return call_fwd(x, u, p), (x, u, p)
+        # differentiated: the engine keeps the solved step for `call_bwd` with the same inputs
+        return call_fwd(x, u, p, keep=True), (x, u, p)
 
     def f_bwd(res, g):
         return tuple(call_bwd(*res, g))

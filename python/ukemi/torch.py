@@ -44,13 +44,13 @@ def _kappa(k: float):
 
 @torch.library.custom_op("ukemi::flat_step", mutates_args=())
 def _step_op(key: int, x: torch.Tensor, u: torch.Tensor, p: torch.Tensor,
-             with_params: bool) -> torch.Tensor:
+             with_params: bool, keep: bool = False) -> torch.Tensor:
     model = _MODELS[key]
-    return _back(_flat.step(model, _np(x), _np(u), _np(p) if with_params else None), x)
+    return _back(_flat.step(model, _np(x), _np(u), _np(p) if with_params else None, keep), x)
 
 
 @_step_op.register_fake
-def _(key, x, u, p, with_params):
+def _(key, x, u, p, with_params, keep=False):
     shapes = [x.shape[:-1], u.shape[:-1]] + ([p.shape[:-1]] if with_params else [])
     return x.new_empty(torch.broadcast_shapes(*shapes) + (x.shape[-1],))
 
@@ -109,9 +109,9 @@ def _batched(info, in_dims, tensors):
 
 
 @_step_op.register_vmap
-def _(info, in_dims, key, x, u, p, with_params):
+def _(info, in_dims, key, x, u, p, with_params, keep=False):
     x, u, p = _batched(info, in_dims[1:4], (x, u, p))
-    return _step_op(key, x, u, p, with_params), 0
+    return _step_op(key, x, u, p, with_params, keep), 0
 
 
 @_step_vjp_op.register_vmap
@@ -136,12 +136,13 @@ class _Step(torch.autograd.Function):
     generate_vmap_rule = True
 
     @staticmethod
-    def forward(x, u, p, key, kappa, with_params):
-        return _step_op(key, x, u, p, with_params)
+    def forward(x, u, p, key, kappa, with_params, keep):
+        # `keep`: a backward pass will follow, so the engine keeps the solved step for it
+        return _step_op(key, x, u, p, with_params, keep)
 
     @staticmethod
     def setup_context(ctx, inputs, output):
-        x, u, p, key, kappa, with_params = inputs
+        x, u, p, key, kappa, with_params, keep = inputs
         ctx.save_for_backward(x, u, p)
         ctx.meta = (key, kappa, with_params)
 
@@ -151,7 +152,7 @@ class _Step(torch.autograd.Function):
         x, u, p = ctx.saved_tensors
         key, kappa, with_params = ctx.meta
         gx, gu, gp = _step_vjp_op(key, kappa, x, u, p, g.contiguous(), with_params)
-        return gx, gu, gp, None, None, None
+        return gx, gu, gp, None, None, None, None
 
 
 class _Rollout(torch.autograd.Function):
@@ -200,7 +201,8 @@ def step(model, x: torch.Tensor, u: torch.Tensor | None = None, params: torch.Te
     """One differentiable step: ``x`` (..., nq + nv), ``u`` (..., nu), optional ``params``
     (..., nparams) in ``model.params`` layout. Gradients at ``kappa_grad`` (None: exact)."""
     u, p, key, k, wp = _args(model, x, u, params, kappa_grad, (model.nu,))
-    return _Step.apply(x, u, p, key, k, wp)
+    keep = torch.is_grad_enabled() and any(t.requires_grad for t in (x, u, p))
+    return _Step.apply(x, u, p, key, k, wp, keep)
 
 
 def rollout(model, x0: torch.Tensor, us: torch.Tensor, params: torch.Tensor | None = None,

@@ -7,7 +7,7 @@
 //! environments step full states instead ([`crate::batch`]).
 use rayon::prelude::*;
 
-use super::rollout::{advance, rollout_vjp_kept};
+use super::rollout::{advance, advance_stored, rollout_vjp_kept};
 use super::tangent::{
     Coordinates, qpos_adjoint_from_tangent, qpos_raw_from_tangent, qpos_tangent_from_raw,
     tangent_adjoint_from_qpos,
@@ -43,11 +43,28 @@ pub fn flat_of(model: &Model, state: &State, out: &mut [f64]) {
 
 /// One step of a flat state. Errors (including non-convergence) name the failure.
 pub fn step(model: &Model, x: &[f64], u: &[f64]) -> Result<Vec<f64>> {
+    step_kept(model, x, u, false)
+}
+
+/// [`step`]; with `keep`, the solved step is kept ([`super::kept`]) for the [`step_vjp`] with
+/// the same model and inputs that differentiation calls next, which then does not solve it
+/// again. The next state is the same bits either way.
+pub fn step_kept(model: &Model, x: &[f64], u: &[f64], keep: bool) -> Result<Vec<f64>> {
     let s = state_of(model, x)?;
     let mut ws = Recycled::new(Workspace::pooled(model));
-    let next = advance(model, &s, u, Coordinates::Minimal, &mut ws)?;
     let mut out = vec![0.0; nx(model)];
-    flat_of(model, &next, &mut out);
+    if keep {
+        let (next, stored) = advance_stored(model, &s, u, Coordinates::Minimal, &mut ws)?;
+        flat_of(model, &next, &mut out);
+        let forward = super::kept::Forward {
+            states: vec![s, next],
+            solutions: vec![stored],
+        };
+        super::kept::keep(super::kept::Key::new(model, x, u), forward);
+    } else {
+        let next = advance(model, &s, u, Coordinates::Minimal, &mut ws)?;
+        flat_of(model, &next, &mut out);
+    }
     Ok(out)
 }
 
@@ -84,7 +101,16 @@ pub fn step_vjp(
         ctrl: true,
         params: with_params,
     };
-    let mut lin = Linearization::new(model, &s, u, Coordinates::Minimal, wrt, kappa_grad)?;
+    let c = Coordinates::Minimal;
+    let mut lin = match super::kept::take(&super::kept::Key::new(model, x, u)) {
+        // the step's forward pass was kept: linearise its stored solution
+        Some(f) if f.solutions.len() == 1 => {
+            let ws = Workspace::pooled(model);
+            let stored = &f.solutions[0];
+            Linearization::from_stored(model, &f.states[0], u, c, wrt, kappa_grad, stored, ws)?
+        }
+        _ => Linearization::new(model, &s, u, c, wrt, kappa_grad)?,
+    };
     let mut qpos_next = vec![0.0; nq];
     qpos_into(model, lin.next_state(), &mut qpos_next);
     let mut adj_t = vec![0.0; 2 * nv];
@@ -117,7 +143,16 @@ pub fn step_jacobians(
         ctrl: true,
         params: with_params,
     };
-    let mut lin = Linearization::new(model, &s, u, Coordinates::Minimal, wrt, kappa_grad)?;
+    let c = Coordinates::Minimal;
+    let mut lin = match super::kept::take(&super::kept::Key::new(model, x, u)) {
+        // the step's forward pass was kept: linearise its stored solution
+        Some(f) if f.solutions.len() == 1 => {
+            let ws = Workspace::pooled(model);
+            let stored = &f.solutions[0];
+            Linearization::from_stored(model, &f.states[0], u, c, wrt, kappa_grad, stored, ws)?
+        }
+        _ => Linearization::new(model, &s, u, c, wrt, kappa_grad)?,
+    };
     let jac = lin.jacobians(model)?;
     let mut qpos_next = vec![0.0; nq];
     qpos_into(model, lin.next_state(), &mut qpos_next);

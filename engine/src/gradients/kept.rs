@@ -1,10 +1,10 @@
 //! Forward rollouts kept for the reverse sweep that follows them.
 //!
-//! Under differentiation JAX and torch call a rollout and later its VJP with the same inputs
-//! (`x0`, `us`, the model); the VJP's own forward pass would solve every step again. A rollout
+//! Under differentiation JAX and torch call a rollout (or a step) and later its VJP with the
+//! same inputs (`x0`, `us`, the model); the VJP would solve every step again. A rollout or step
 //! made with `keep` stores its states and solutions here under those inputs, bit for bit, and
-//! [`take`] hands them to the VJP, which then only linearises (all steps at once on the thread
-//! pool). At most [`BUDGET`] bytes are held; the oldest rollouts go first.
+//! [`take`] hands them to the VJP, which then only linearises (a rollout's steps all at once on
+//! the thread pool). At most [`BUDGET`] bytes are held; the oldest go first.
 use std::collections::VecDeque;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -41,6 +41,8 @@ impl Forward {
 /// while changing anything, hence its parameters and options), `x0` and `us`.
 #[derive(PartialEq)]
 pub(crate) struct Key {
+    /// A hash of the rest, compared first (a JAX scan keeps one step per iteration).
+    hash: u64,
     topology: u64,
     options: Options,
     params: Vec<u64>,
@@ -50,13 +52,18 @@ pub(crate) struct Key {
 
 impl Key {
     pub(crate) fn new(model: &Model, x0: &[f64], us: &[f64]) -> Key {
-        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect();
+        use std::hash::{Hash, Hasher};
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<u64>>();
+        let (params, x0, us) = (bits(&model.params()), bits(x0), bits(us));
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        (model.topology_id(), &params, &x0, &us).hash(&mut h);
         Key {
+            hash: h.finish(),
             topology: model.topology_id(),
             options: model.options.clone(),
-            params: bits(&model.params()),
-            x0: bits(x0),
-            us: bits(us),
+            params,
+            x0,
+            us,
         }
     }
 }
@@ -201,6 +208,38 @@ mod tests {
                     .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
                 assert!(diff <= 1e-12 * scale, "{diff:e} of {scale:e}");
             }
+        }
+    }
+
+    /// A kept step gives the same next state, and its VJP the adjoints of a fresh solve.
+    #[test]
+    fn a_kept_step_gives_the_same_next_state_and_adjoints() {
+        let (m, x0, us) = pushed_box();
+        let n = flat::nx(&m);
+        let g: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).cos()).collect();
+        let mut x = x0.clone();
+        for (k, u) in us.iter().enumerate().take(12) {
+            let u = [*u];
+            let fresh = flat::step_vjp(&m, &x, &u, &g, None, true).unwrap();
+            let plain = flat::step(&m, &x, &u).unwrap();
+            let kept = flat::step_kept(&m, &x, &u, true).unwrap();
+            assert!(
+                kept.iter()
+                    .zip(&plain)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+            let hits = stats().0;
+            let r = flat::step_vjp(&m, &x, &u, &g, None, true).unwrap();
+            assert!(stats().0 > hits, "step {k}: the VJP took the kept step");
+            for (a, b) in [(&r.0, &fresh.0), (&r.1, &fresh.1), (&r.2, &fresh.2)] {
+                let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                let diff = a
+                    .iter()
+                    .zip(b)
+                    .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                assert!(diff <= 1e-12 * scale, "step {k}: {diff:e} of {scale:e}");
+            }
+            x = plain;
         }
     }
 

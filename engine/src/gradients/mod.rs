@@ -47,10 +47,11 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::contact::Frozen;
 use crate::math::quat;
 use crate::model::Model;
 use crate::model::topology_body_node as body_node;
-use crate::solver::{central, newton};
+use crate::solver::{central, inequality, newton};
 use crate::state::{Recycled, SolveStatus, State, StepReport, Workspace};
 use crate::step::{AppliedForces, validate_inputs};
 use crate::{Error, Result, ensure};
@@ -271,6 +272,9 @@ pub(crate) struct StoredSolution {
     w: Vec<f64>,
     active: Vec<bool>,
     saturated: Vec<Option<[f64; 2]>>,
+    /// The features the active candidates held for the step (`Workspace::frozen`), which a
+    /// re-freeze after the solve may have moved from those the state's prediction chooses.
+    frozen: Vec<(usize, Option<Frozen>)>,
     report: StepReport,
 }
 
@@ -281,15 +285,24 @@ impl StoredSolution {
             w: ws.w.clone(),
             active: ws.active.clone(),
             saturated: ws.saturated.clone(),
+            frozen: active_frozen(ws),
             report,
         }
     }
 }
 
+/// The frozen features of the active contact candidates of `ws`.
+fn active_frozen(ws: &Workspace) -> Vec<(usize, Option<Frozen>)> {
+    crate::solver::inequality::active_candidates(&ws.active)
+        .map(|c| (c, ws.frozen[c]))
+        .collect()
+}
+
 impl StoredSolution {
     /// Bytes of its arrays.
     pub(crate) fn heap_bytes(&self) -> usize {
-        8 * self.w.len() + self.active.len() + 24 * self.saturated.len()
+        let frozen = std::mem::size_of::<(usize, Option<Frozen>)>() * self.frozen.len();
+        8 * self.w.len() + self.active.len() + 24 * self.saturated.len() + frozen
     }
 }
 
@@ -453,6 +466,10 @@ impl SolveLinearization {
         ws.w.copy_from_slice(&stored.w);
         ws.active.copy_from_slice(&stored.active);
         ws.saturated.copy_from_slice(&stored.saturated);
+        // the features the solve ended with (`evaluate` prepares no candidate prepared here)
+        for &(c, frozen) in &stored.frozen {
+            inequality::prepare_candidate_holding(model, &point.state, &mut ws, c, frozen);
+        }
         newton::evaluate(model, &point.state, &mut ws, false, 0.0);
         let mut next = point.state.clone();
         newton::write_state(model, &mut next, &ws);
@@ -525,7 +542,8 @@ impl SolveLinearization {
         let np = inputs.len() - nx - nu;
         let w = ws.w.clone();
         let t0 = Instant::now();
-        let parts = partials::partials(model, &point, ctrl, &w, &ws.active, &inputs, method)?;
+        let held = (&ws.active[..], &active_frozen(&ws)[..]);
+        let parts = partials::partials(model, &point, ctrl, &w, held, &inputs, method)?;
         times.partials = t0.elapsed().as_secs_f64();
         Ok(SolveLinearization {
             coords,

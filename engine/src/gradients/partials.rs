@@ -15,6 +15,7 @@ use nalgebra::DMatrix;
 use super::sparsity::{Interactions, Support, colour, transmission_bodies};
 use super::tangent::{Coordinates, Point};
 use super::{FD_STEP, next_state_into};
+use crate::contact::Frozen;
 use crate::model::Model;
 use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
@@ -151,6 +152,9 @@ impl BaseJoints {
     }
 }
 
+/// The contact activation of the gradient point and the feature each active candidate held.
+pub(super) type Held<'h> = (&'h [bool], &'h [(usize, Option<Frozen>)]);
+
 /// Scratch for evaluating the residual and output map at perturbed inputs.
 struct Probe<'a> {
     base: &'a Model,
@@ -169,13 +173,21 @@ struct Probe<'a> {
     /// The joint terms at the unperturbed inputs: a restricted residual recomputes only the
     /// joints its perturbation touches (`Workspace::joint_filter`).
     base_joints: BaseJoints,
+    /// The feature each active contact candidate held at the gradient point: perturbed states
+    /// keep it (the residual map is the solve's, with its features).
+    frozen: Vec<Option<Frozen>>,
 }
 
 impl<'a> Probe<'a> {
-    fn new(model: &'a Model, point: &'a Point, ctrl: &'a [f64], active: &[bool]) -> Probe<'a> {
+    fn new(model: &'a Model, point: &'a Point, ctrl: &'a [f64], held: Held) -> Probe<'a> {
+        let (active, held_frozen) = held;
         let mut ws = Recycled::new(Workspace::pooled(model));
         // the residual map is linearised with the solve's contact activation frozen
         ws.active.copy_from_slice(active);
+        let mut frozen = vec![None; model.contacts.len()];
+        for &(c, f) in held_frozen {
+            frozen[c] = f;
+        }
         newton::prepare_smooth_forces(
             model,
             &point.state,
@@ -185,6 +197,7 @@ impl<'a> Probe<'a> {
         );
         let base_joints = BaseJoints::of(&ws);
         Probe {
+            frozen,
             base_joints,
             base: model,
             point,
@@ -250,6 +263,12 @@ impl<'a> Probe<'a> {
         let forces = AppliedForces::default();
         let model = self.perturbed.as_ref().unwrap_or(self.base);
         newton::prepare_forces(model, &self.state, &mut self.ws, &self.ctrl, &forces);
+        let active = std::mem::take(&mut self.ws.active);
+        for c in crate::solver::inequality::active_candidates(&active) {
+            let (state, f) = (&self.state, self.frozen[c]);
+            crate::solver::inequality::prepare_candidate_holding(model, state, &mut self.ws, c, f);
+        }
+        self.ws.active = active;
         newton::evaluate_in(model, &self.state, &mut self.ws, w, &mut self.residual, 0.0);
     }
 
@@ -274,7 +293,8 @@ impl<'a> Probe<'a> {
         // the contact frames (and frozen disk rim points) of `inequality::prepare`, for the
         // candidates that move
         for &c in contacts.iter().filter(|&&c| active[c]) {
-            crate::solver::inequality::prepare_candidate(model, state, &mut self.ws, c);
+            let f = self.frozen[c];
+            crate::solver::inequality::prepare_candidate_holding(model, state, &mut self.ws, c, f);
             self.ws.active[c] = true;
         }
         newton::evaluate_in(model, state, &mut self.ws, w, &mut self.residual, 0.0);
@@ -405,13 +425,13 @@ pub(super) fn partials(
     point: &Point,
     ctrl: &[f64],
     w: &[f64],
-    active: &[bool],
+    held: Held,
     inputs: &[Input],
     method: PartialsMethod,
 ) -> crate::Result<Partials> {
     let (nw, ny, nz) = (w.len(), point.coords.dim(model), inputs.len());
     let eps = steps(model, inputs);
-    let mut probe = Probe::new(model, point, ctrl, active);
+    let mut probe = Probe::new(model, point, ctrl, held);
     let nwc = 6 * (model.nbody() - 1);
     let mut out = Partials {
         r_z: Vec::new(),

@@ -46,7 +46,7 @@ pub(crate) fn advance(
 
 /// [`advance`], also returning what the reverse sweep needs to linearise the step without
 /// solving it again. A step whose whole solve fails is subdivided as [`crate::step`] does.
-fn advance_stored(
+pub(super) fn advance_stored(
     model: &Model,
     state: &State,
     ctrl: &[f64],

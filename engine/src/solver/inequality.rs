@@ -334,7 +334,7 @@ impl GeomBound {
     }
 }
 
-/// [`prepare_candidate`] for every active candidate that [`prepare`] left out.
+/// [`prepare`] for every active candidate that it left out.
 pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) {
     let active = std::mem::take(&mut ws.active);
     let mut memo = crate::contact::BoxPairMemo::default();
@@ -346,12 +346,24 @@ pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) 
     ws.active = active;
 }
 
-/// [`prepare`] for candidate `c` alone.
-pub(crate) fn prepare_candidate(model: &Model, state: &State, ws: &mut Workspace, c: usize) {
+/// [`prepare`] for candidate `c` alone (its contact frame at `state` with the feature chosen
+/// at the state's predicted poses, as a solve prepares it), then holding `frozen` as the
+/// feature its gap at the next poses is measured with: the one the solve ended with, which
+/// [`refreeze_disks`] may have moved after the frame was prepared. The gradients linearise a
+/// solved step so, also at perturbed states (the features are material: a rim point or a face
+/// of the geom).
+pub(crate) fn prepare_candidate_holding(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    c: usize,
+    frozen: Option<Frozen>,
+) {
     prepare_candidate_with(model, state, ws, c, &mut Default::default());
+    ws.frozen[c] = frozen;
 }
 
-/// [`prepare_candidate`] within a pass over the candidates at `state` (`memo`: see
+/// [`prepare`] for candidate `c` within a pass over the candidates at `state` (`memo`: see
 /// [`crate::contact::BoxPairMemo`]).
 fn prepare_candidate_with(
     model: &Model,
@@ -536,10 +548,8 @@ const DISK_REFREEZE_TOL: f64 = 1e-10;
 /// After a solve: every frozen disk–plane candidate whose exact lowest rim point at the new
 /// configuration is below `-DISK_REFREEZE_TOL` is re-frozen at that point (the velocity change
 /// of the step moved the lowest point away from the predicted one); returns how many were (the
-/// step must then be solved again). NOTE: the gradients re-derive frozen points from the state
-/// (`prepare_candidate`), so at a step that re-froze a disk they linearise the first freeze's
-/// residual, not the re-frozen one (rare: a near-flat disk whose velocity changed enough in
-/// the step to sink its predicted rim point).
+/// step must then be solved again). The contact frames stay those prepared with the first
+/// freeze; the gradients linearise the step so (`prepare_candidate_holding`).
 pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
     let mut n = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
