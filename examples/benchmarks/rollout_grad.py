@@ -7,7 +7,10 @@ robots, seconds for
 * ``fwd + vjp``, ``kept``: the same two engine calls the gradient makes (``_flat.rollout`` then
   ``_flat.rollout_vjp``), without and with the forward pass kept for the VJP (what ``jax.grad``
   and torch's ``backward`` do since session 18: the VJP then only linearises the stored steps,
-  all at once on the thread pool, instead of solving every step again).
+  all at once on the thread pool, instead of solving every step again);
+* ``steps``: the same per step, as a policy in the loop differentiates it: ``--steps`` calls of
+  ``_flat.step`` then as many ``_flat.step_vjp`` in reverse, without and with each solved step
+  kept for its VJP.
 
 Run: .venv/bin/python examples/benchmarks/rollout_grad.py [--steps 300] [--threads N]
 """
@@ -39,7 +42,8 @@ def main():
 
     import ukemi.jax as ujax
 
-    print(f"{'model':10s} | {'forward':>8s} {'grad':>8s} | {'fwd + vjp':>9s} {'kept':>8s}")
+    print(f"{'model':10s} | {'forward':>8s} {'grad':>8s} | {'fwd + vjp':>9s} {'kept':>8s} | "
+          f"{'steps':>8s} {'kept':>8s}")
     for name in ("humanoid", "a1", "panda", "x2"):
         path = SHARED / f"{name}.xml"
         if args.only not in name or not path.exists():
@@ -72,7 +76,17 @@ def main():
             _flat.rollout(m, x0, us, None, keep)
             _flat.rollout_vjp(m, x0, us, None, w, None)
             times.append(time.perf_counter() - t0)
-        print(f"{name:10s} | {times[0]:7.3f}s {times[1]:7.3f}s | {times[2]:8.3f}s {times[3]:7.3f}s")
+        for keep in (False, True):
+            t0 = time.perf_counter()
+            xs = [x0]
+            for u in us:
+                xs.append(_flat.step(m, xs[-1], u, None, keep))
+            lam = np.zeros_like(x0)
+            for k in reversed(range(len(us))):
+                lam = _flat.step_vjp(m, xs[k], us[k], None, lam + w[k + 1], None)[0]
+            times.append(time.perf_counter() - t0)
+        print(f"{name:10s} | {times[0]:7.3f}s {times[1]:7.3f}s | {times[2]:8.3f}s {times[3]:7.3f}s"
+              f" | {times[4]:7.3f}s {times[5]:7.3f}s")
     print(f"{ukemi.get_num_threads()} thread(s); exact gradients (kappa_grad=None)")
 
 
