@@ -7,7 +7,9 @@
 //! solved step is handed to the pool and its Jacobians formed while the forward pass goes on,
 //! and the reverse sweep is dense products with the adjoints. On one thread, or inside a
 //! batch that fills the pool, each step is linearised when the sweep reaches it and applies
-//! one transposed back-substitution ([`Sweep::Sequential`], the least work).
+//! one transposed back-substitution ([`Sweep::Sequential`], the least work). When the forward
+//! pass itself was kept by a differentiated JAX/torch rollout ([`super::kept`]), no step is
+//! solved again: the sweep only linearises them (all at once on the pool).
 use std::sync::OnceLock;
 
 use nalgebra::{DMatrix, DVector};
@@ -292,9 +294,17 @@ pub(crate) fn rollout_vjp_kept(
         0
     };
     let sweep = Sweep::choose(nstep, ny, ny + nu + np);
-    let args = (kappa_grad, with_params, adjoint);
     rollout_vjp_sweep(
-        model, state, ctrls, nstep, coords, args.0, args.1, args.2, sweep, kept,
+        model,
+        state,
+        ctrls,
+        nstep,
+        coords,
+        kappa_grad,
+        with_params,
+        adjoint,
+        sweep,
+        kept,
     )
 }
 
