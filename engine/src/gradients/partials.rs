@@ -478,7 +478,7 @@ pub(super) fn partials(
                 .iter()
                 .map(|g| {
                     let mut cs: Vec<usize> =
-                        g.iter().flat_map(|&c| sup[c].contacts.clone()).collect();
+                        g.iter().flat_map(|&c| sup[c].contacts.iter().copied()).collect();
                     cs.sort_unstable();
                     cs.dedup();
                     let mut touched = vec![false; model.nbody()];
