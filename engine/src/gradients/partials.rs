@@ -477,8 +477,10 @@ pub(super) fn partials(
             let refresh: Vec<Refresh> = groups
                 .iter()
                 .map(|g| {
-                    let mut cs: Vec<usize> =
-                        g.iter().flat_map(|&c| sup[c].contacts.iter().copied()).collect();
+                    let mut cs: Vec<usize> = g
+                        .iter()
+                        .flat_map(|&c| sup[c].contacts.iter().copied())
+                        .collect();
                     cs.sort_unstable();
                     cs.dedup();
                     let mut touched = vec![false; model.nbody()];
