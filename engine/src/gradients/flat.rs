@@ -81,6 +81,27 @@ pub fn step_with_status(model: &Model, x: &[f64], u: &[f64]) -> Result<(Vec<f64>
     Ok((out, report.status.code()))
 }
 
+/// The linearisation of the flat step from `x` (its state `s`) with `u`: of its stored
+/// solution when a differentiated forward pass kept it ([`step_kept`]), else of a new solve.
+fn linearise(
+    model: &Model,
+    s: &State,
+    x: &[f64],
+    u: &[f64],
+    wrt: Wrt,
+    kappa_grad: Option<f64>,
+) -> Result<Linearization> {
+    let c = Coordinates::Minimal;
+    match super::kept::take(&super::kept::Key::new(model, x, u)) {
+        Some(f) if f.solutions.len() == 1 => {
+            let ws = Workspace::pooled(model);
+            let stored = &f.solutions[0];
+            Linearization::from_stored(model, &f.states[0], u, c, wrt, kappa_grad, stored, ws)
+        }
+        _ => Linearization::new(model, s, u, c, wrt, kappa_grad),
+    }
+}
+
 /// Adjoints `(x, u, params)` of one flat step given the adjoint of its output.
 pub fn step_vjp(
     model: &Model,
@@ -101,16 +122,7 @@ pub fn step_vjp(
         ctrl: true,
         params: with_params,
     };
-    let c = Coordinates::Minimal;
-    let mut lin = match super::kept::take(&super::kept::Key::new(model, x, u)) {
-        // the step's forward pass was kept: linearise its stored solution
-        Some(f) if f.solutions.len() == 1 => {
-            let ws = Workspace::pooled(model);
-            let stored = &f.solutions[0];
-            Linearization::from_stored(model, &f.states[0], u, c, wrt, kappa_grad, stored, ws)?
-        }
-        _ => Linearization::new(model, &s, u, c, wrt, kappa_grad)?,
-    };
+    let mut lin = linearise(model, &s, x, u, wrt, kappa_grad)?;
     let mut qpos_next = vec![0.0; nq];
     qpos_into(model, lin.next_state(), &mut qpos_next);
     let mut adj_t = vec![0.0; 2 * nv];
@@ -143,16 +155,7 @@ pub fn step_jacobians(
         ctrl: true,
         params: with_params,
     };
-    let c = Coordinates::Minimal;
-    let mut lin = match super::kept::take(&super::kept::Key::new(model, x, u)) {
-        // the step's forward pass was kept: linearise its stored solution
-        Some(f) if f.solutions.len() == 1 => {
-            let ws = Workspace::pooled(model);
-            let stored = &f.solutions[0];
-            Linearization::from_stored(model, &f.states[0], u, c, wrt, kappa_grad, stored, ws)?
-        }
-        _ => Linearization::new(model, &s, u, c, wrt, kappa_grad)?,
-    };
+    let mut lin = linearise(model, &s, x, u, wrt, kappa_grad)?;
     let jac = lin.jacobians(model)?;
     let mut qpos_next = vec![0.0; nq];
     qpos_into(model, lin.next_state(), &mut qpos_next);

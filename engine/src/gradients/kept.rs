@@ -147,28 +147,15 @@ pub fn clear() {
 
 #[cfg(test)]
 mod tests {
-    use super::super::flat;
+    use super::super::{flat, test_scenes};
     use super::*;
-    use crate::{ActuatorSpec, BodySpec, GeomSpec, JointKind, JointSpec, ModelBuilder, Shape};
 
-    /// A box on the floor pushed along x (sticks, slides, stops): `(model, x0, us)` of 25 steps.
+    /// The pushed box in flat form: `(model, x0, us)` of 25 steps.
     fn pushed_box() -> (Model, Vec<f64>, Vec<f64>) {
-        let half = nalgebra::Vector3::new(0.05, 0.05, 0.05);
-        let m = ModelBuilder::new()
-            .timestep(0.01)
-            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.5))
-            .body(BodySpec::new("box", 1.0, [1.0 / 600.0; 3]).pos([0.0, 0.0, 0.05]))
-            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
-            .geom(GeomSpec::new("box", "box", Shape::Box { half_extents: half }).friction(0.5))
-            .actuator(ActuatorSpec::motor("push", "free", 0, 1.0))
-            .compile()
-            .unwrap();
-        // at rest on the floor: qpos (position, quaternion), qvel; settled for 20 steps
+        let (m, s) = test_scenes::pushed_box();
         let mut x0 = vec![0.0; flat::nx(&m)];
-        x0[..4].copy_from_slice(&[0.0, 0.0, 0.05, 1.0]);
-        let settled = flat::rollout(&m, &x0, &[0.0; 20], 20).unwrap();
-        let x0 = settled[20 * x0.len()..].to_vec();
-        let us = (0..25).map(|k| 8.0 * (k as f64 * 0.3).sin()).collect();
+        flat::flat_of(&m, &s, &mut x0);
+        let us = (0..25).map(test_scenes::push).collect();
         (m, x0, us)
     }
 
@@ -201,11 +188,7 @@ mod tests {
             };
             assert!(stats().0 > hits, "the VJP took the kept rollout");
             for (a, b) in [(&r.0, &fresh.0), (&r.1, &fresh.1), (&r.2, &fresh.2)] {
-                let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
-                let diff = a
-                    .iter()
-                    .zip(b)
-                    .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                let (diff, scale) = test_scenes::max_diff(a, b);
                 assert!(diff <= 1e-12 * scale, "{diff:e} of {scale:e}");
             }
         }
@@ -232,11 +215,7 @@ mod tests {
             let r = flat::step_vjp(&m, &x, &u, &g, None, true).unwrap();
             assert!(stats().0 > hits, "step {k}: the VJP took the kept step");
             for (a, b) in [(&r.0, &fresh.0), (&r.1, &fresh.1), (&r.2, &fresh.2)] {
-                let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
-                let diff = a
-                    .iter()
-                    .zip(b)
-                    .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                let (diff, scale) = test_scenes::max_diff(a, b);
                 assert!(diff <= 1e-12 * scale, "step {k}: {diff:e} of {scale:e}");
             }
             x = plain;

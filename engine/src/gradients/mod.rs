@@ -42,6 +42,8 @@ mod rollout;
 mod sparsity;
 mod substeps;
 pub mod tangent;
+#[cfg(test)]
+mod test_scenes;
 
 use std::time::Instant;
 

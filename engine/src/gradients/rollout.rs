@@ -99,7 +99,7 @@ pub fn rollout_vjp(
     let adjoint = |k: usize, _: &State, out: &mut [f64]| {
         out.copy_from_slice(&adjoint_states[k * ny..(k + 1) * ny]);
     };
-    rollout_vjp_with(
+    rollout_vjp_kept(
         model,
         state,
         ctrls,
@@ -108,6 +108,7 @@ pub fn rollout_vjp(
         kappa_grad,
         with_params,
         &adjoint,
+        None,
     )
     .map(|(adj, _)| adj)
 }
@@ -248,33 +249,8 @@ fn rollout_jacobians_sweep(
 }
 
 /// [`rollout_vjp`] with the loss adjoint of each state supplied by `adjoint(k, x_k, out)`
-/// (tangent coordinates). Also returns the states `x_0..=x_T`.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn rollout_vjp_with(
-    model: &Model,
-    state: &State,
-    ctrls: &[f64],
-    nstep: usize,
-    coords: Coordinates,
-    kappa_grad: Option<f64>,
-    with_params: bool,
-    adjoint: &dyn Fn(usize, &State, &mut [f64]),
-) -> Result<(RolloutAdjoint, Vec<State>)> {
-    rollout_vjp_kept(
-        model,
-        state,
-        ctrls,
-        nstep,
-        coords,
-        kappa_grad,
-        with_params,
-        adjoint,
-        None,
-    )
-}
-
-/// [`rollout_vjp_with`] from a kept forward pass when there is one (its states and solutions
-/// from the same inputs, see [`super::kept`]).
+/// (tangent coordinates), from a kept forward pass when there is one (its states and solutions
+/// from the same inputs, see [`super::kept`]). Also returns the states `x_0..=x_T`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rollout_vjp_kept(
     model: &Model,
@@ -308,7 +284,7 @@ pub(crate) fn rollout_vjp_kept(
     )
 }
 
-/// [`rollout_vjp_with`] by the given sweep.
+/// [`rollout_vjp_kept`] by the given sweep.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rollout_vjp_sweep(
     model: &Model,
@@ -569,33 +545,8 @@ fn forward_overlapped(
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_scenes::{max_diff, push, pushed_box};
     use super::*;
-    use crate::{ActuatorSpec, BodySpec, GeomSpec, JointKind, JointSpec, ModelBuilder, Shape};
-
-    /// A 1 kg box (10 cm) resting on the floor (μ = 0.5), pushed along x by a motor on its
-    /// free joint: under the controls below it sticks, slides and stops again.
-    fn pushed_box() -> (Model, State) {
-        let half = nalgebra::Vector3::new(0.05, 0.05, 0.05);
-        let m = ModelBuilder::new()
-            .timestep(0.01)
-            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.5))
-            .body(BodySpec::new("box", 1.0, [1.0 / 600.0; 3]).pos([0.0, 0.0, 0.05]))
-            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
-            .geom(GeomSpec::new("box", "box", Shape::Box { half_extents: half }).friction(0.5))
-            .actuator(ActuatorSpec::motor("push", "free", 0, 1.0))
-            .compile()
-            .unwrap();
-        let mut s = State::reference(&m);
-        let mut ws = Workspace::new(&m);
-        for _ in 0..20 {
-            crate::step(&m, &mut s, &mut ws, &[0.0]).unwrap();
-        }
-        (m, s)
-    }
-
-    fn push(k: usize) -> f64 {
-        8.0 * (k as f64 * 0.3).sin()
-    }
 
     fn sweep(
         m: &Model,
@@ -629,11 +580,7 @@ mod tests {
                 (&a.ctrls, &b.ctrls),
                 (&a.params, &b.params),
             ] {
-                let scale = x.iter().fold(1.0f64, |m, v| m.max(v.abs()));
-                let diff = x
-                    .iter()
-                    .zip(y)
-                    .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                let (diff, scale) = max_diff(y, x);
                 assert!(
                     diff < 1e-9 * scale,
                     "kappa {kappa:?}: {diff:e} of {scale:e}"
