@@ -225,6 +225,21 @@ pub fn kept_rollouts() -> (usize, usize, usize, usize) {
     ukemi_engine::gradients::kept::stats()
 }
 
+/// `(hits, misses, hints held, bytes held)` of the warm starts flat steps hand on.
+#[pyfunction]
+#[pyo3(name = "_warm_hints")]
+pub fn warm_hints() -> (usize, usize, usize, usize) {
+    ukemi_engine::gradients::hints::stats()
+}
+
+/// Whether flat steps (`ukemi.jax.step`, `ukemi.torch.step`, flat rollouts) hand the solver's
+/// warm start of the state they return to the flat step that takes it next; returns the
+/// previous setting. Off, every flat step starts cold.
+#[pyfunction]
+pub fn set_flat_warm_start(enabled: bool) -> bool {
+    ukemi_engine::gradients::hints::set_enabled(enabled)
+}
+
 /// `(T, r, c)` row-major from `T` matrices of shape `(r, c)`.
 fn stacked<'py>(
     py: Python<'py>,

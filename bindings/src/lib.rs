@@ -29,6 +29,8 @@ fn _ukemi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gradients::rollout_vjp_py, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::rollout_jacobians_py, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::kept_rollouts, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::warm_hints, m)?)?;
+    m.add_function(wrap_pyfunction!(gradients::set_flat_warm_start, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_step, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_step_vjp, m)?)?;
     m.add_function(wrap_pyfunction!(gradients::flat_rollout, m)?)?;

@@ -10,7 +10,9 @@ robots, seconds for
   all at once on the thread pool, instead of solving every step again);
 * ``steps``: the same per step, as a policy in the loop differentiates it: ``--steps`` calls of
   ``_flat.step`` then as many ``_flat.step_vjp`` in reverse, without and with each solved step
-  kept for its VJP.
+  kept for its VJP; ``cold``: kept, with each flat step starting its solve cold
+  (``ukemi.set_flat_warm_start(False)``) instead of where the step that returned its input
+  ended (the default since session 19).
 
 Run: .venv/bin/python examples/benchmarks/rollout_grad.py [--steps 300] [--threads N]
 """
@@ -43,7 +45,7 @@ def main():
     import ukemi.jax as ujax
 
     print(f"{'model':10s} | {'forward':>8s} {'grad':>8s} | {'fwd + vjp':>9s} {'kept':>8s} | "
-          f"{'steps':>8s} {'kept':>8s}")
+          f"{'steps':>8s} {'kept':>8s} {'cold':>8s}")
     for name in ("humanoid", "a1", "panda", "x2"):
         path = SHARED / f"{name}.xml"
         if args.only not in name or not path.exists():
@@ -76,7 +78,8 @@ def main():
             _flat.rollout(m, x0, us, None, keep)
             _flat.rollout_vjp(m, x0, us, None, w, None)
             times.append(time.perf_counter() - t0)
-        for keep in (False, True):
+        for keep, warm in ((False, True), (True, True), (True, False)):
+            ukemi.set_flat_warm_start(warm)
             t0 = time.perf_counter()
             xs = [x0]
             for u in us:
@@ -85,8 +88,9 @@ def main():
             for k in reversed(range(len(us))):
                 lam = _flat.step_vjp(m, xs[k], us[k], None, lam + w[k + 1], None)[0]
             times.append(time.perf_counter() - t0)
+        ukemi.set_flat_warm_start(True)
         print(f"{name:10s} | {times[0]:7.3f}s {times[1]:7.3f}s | {times[2]:8.3f}s {times[3]:7.3f}s"
-              f" | {times[4]:7.3f}s {times[5]:7.3f}s")
+              f" | {times[4]:7.3f}s {times[5]:7.3f}s {times[6]:7.3f}s")
     print(f"{ukemi.get_num_threads()} thread(s); exact gradients (kappa_grad=None)")
 
 

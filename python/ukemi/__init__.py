@@ -30,7 +30,7 @@ from ._gradients import (
 )
 from ._simulate import (STATUS_NAMES, SUCCESS_STATUSES, Trajectory, rollout, signed_distances,
                         solver_trace, step, step_smoothed)
-from ._ukemi import Model, State, StepInfo, get_num_threads, set_num_threads
+from ._ukemi import Model, State, StepInfo, get_num_threads, set_flat_warm_start, set_num_threads
 from .errors import (
     ConvergenceError,
     InputError,
@@ -74,6 +74,7 @@ __all__ = [
     "rollout",
     "rollout_jacobians",
     "rollout_vjp",
+    "set_flat_warm_start",
     "set_num_threads",
     "signed_distances",
     "step",

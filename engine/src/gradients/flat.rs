@@ -2,9 +2,9 @@
 //! `x = [qpos, qvel]` (length `nq + nv`, quaternions as 4 raw numbers), so an adjoint of `x` is
 //! a plain array of the same shape. Batched versions run the batch in parallel (rayon).
 //!
-//! A flat state carries no solver warm start, so every flat step starts the contact solve from
-//! the neutral point; [`rollout`] chains full states internally and keeps the warm start. The
-//! environments step full states instead ([`crate::batch`]).
+//! A flat state carries no solver warm start; each flat step hands the warm start of the state
+//! it returns to the flat step that takes that state next ([`super::hints`]), and [`rollout`]
+//! chains full states internally. The environments step full states instead ([`crate::batch`]).
 use rayon::prelude::*;
 
 use super::rollout::{advance, advance_stored, rollout_vjp_kept};
@@ -34,6 +34,14 @@ pub fn state_of(model: &Model, x: &[f64]) -> Result<State> {
     Ok(s)
 }
 
+/// The full state of a flat `x`, with the warm start of the flat step that returned `x` if
+/// one did ([`super::hints`]), else the reference one.
+pub(crate) fn warm_state_of(model: &Model, x: &[f64]) -> Result<State> {
+    let mut s = state_of(model, x)?;
+    super::hints::recall(model, x, &mut s);
+    Ok(s)
+}
+
 /// `[qpos, qvel]` of a state.
 pub fn flat_of(model: &Model, state: &State, out: &mut [f64]) {
     let (q, v) = out.split_at_mut(model.nq);
@@ -50,12 +58,13 @@ pub fn step(model: &Model, x: &[f64], u: &[f64]) -> Result<Vec<f64>> {
 /// the same model and inputs that differentiation calls next, which then does not solve it
 /// again. The next state is the same bits either way.
 pub fn step_kept(model: &Model, x: &[f64], u: &[f64], keep: bool) -> Result<Vec<f64>> {
-    let s = state_of(model, x)?;
+    let s = warm_state_of(model, x)?;
     let mut ws = Recycled::new(Workspace::pooled(model));
     let mut out = vec![0.0; nx(model)];
     if keep {
         let (next, stored) = advance_stored(model, &s, u, Coordinates::Minimal, &mut ws)?;
         flat_of(model, &next, &mut out);
+        super::hints::remember(model, &out, &next);
         let forward = super::kept::Forward {
             states: vec![s, next],
             solutions: vec![stored],
@@ -64,6 +73,7 @@ pub fn step_kept(model: &Model, x: &[f64], u: &[f64], keep: bool) -> Result<Vec<
     } else {
         let next = advance(model, &s, u, Coordinates::Minimal, &mut ws)?;
         flat_of(model, &next, &mut out);
+        super::hints::remember(model, &out, &next);
     }
     Ok(out)
 }
@@ -72,12 +82,15 @@ pub fn step_kept(model: &Model, x: &[f64], u: &[f64], keep: bool) -> Result<Vec<
 /// [`crate::SolveStatus::code`] (0 = converged). A step that did not converge returns its last
 /// iterate, flagged, so array programs (under `jit`) can mask it instead of aborting.
 pub fn step_with_status(model: &Model, x: &[f64], u: &[f64]) -> Result<(Vec<f64>, u8)> {
-    let mut s = state_of(model, x)?;
+    let mut s = warm_state_of(model, x)?;
     let mut ws = Recycled::new(Workspace::pooled(model));
     // subdivides a failed step, as `ukemi.step` does
     let report = crate::step::step(model, &mut s, &mut ws, u)?;
     let mut out = vec![0.0; nx(model)];
     flat_of(model, &s, &mut out);
+    if report.status.code() == 0 {
+        super::hints::remember(model, &out, &s);
+    }
     Ok((out, report.status.code()))
 }
 
@@ -116,7 +129,7 @@ pub fn step_vjp(
         adj_next.len() == nq + nv,
         Error::shape("adjoint_next", &[nq + nv], &[adj_next.len()])
     );
-    let s = state_of(model, x)?;
+    let s = warm_state_of(model, x)?;
     let wrt = Wrt {
         state: true,
         ctrl: true,
@@ -149,7 +162,7 @@ pub fn step_jacobians(
     use nalgebra::DMatrix;
     let (nq, nv) = (model.nq, model.nv);
     let n = nq + nv;
-    let s = state_of(model, x)?;
+    let s = warm_state_of(model, x)?;
     let wrt = Wrt {
         state: true,
         ctrl: true,
@@ -210,19 +223,20 @@ pub fn rollout_kept(
     );
     let n = nx(model);
     if keep {
-        let s0 = state_of(model, x0)?;
+        let s0 = warm_state_of(model, x0)?;
         let (states, solutions, _) =
             super::rollout::forward_stored(model, s0, us, nstep, Coordinates::Minimal)?;
         let mut out = vec![0.0; (nstep + 1) * n];
         for (s, o) in states.iter().zip(out.chunks_exact_mut(n)) {
             flat_of(model, s, o);
         }
+        super::hints::remember(model, &out[nstep * n..], &states[nstep]);
         let key = super::kept::Key::new(model, x0, us);
         super::kept::keep(key, super::kept::Forward { states, solutions });
         return Ok(out);
     }
     let mut out = vec![0.0; (nstep + 1) * n];
-    let mut s = state_of(model, x0)?;
+    let mut s = warm_state_of(model, x0)?;
     let mut ws = Recycled::new(Workspace::pooled(model));
     flat_of(model, &s, &mut out[..n]);
     for k in 0..nstep {
@@ -236,6 +250,7 @@ pub fn rollout_kept(
         .map_err(|e| e.at(format!(" (step {k})")))?;
         flat_of(model, &s, &mut out[(k + 1) * n..(k + 2) * n]);
     }
+    super::hints::remember(model, &out[nstep * n..], &s);
     Ok(out)
 }
 
@@ -254,7 +269,7 @@ pub fn rollout_vjp(
         adj_xs.len() == (nstep + 1) * n,
         Error::shape("adjoint_xs", &[nstep + 1, n], &[adj_xs.len() / n, n])
     );
-    let s0 = state_of(model, x0)?;
+    let s0 = warm_state_of(model, x0)?;
     let kept = super::kept::take(&super::kept::Key::new(model, x0, us));
     let adjoint = |k: usize, s: &State, out: &mut [f64]| {
         let mut q = vec![0.0; nq];

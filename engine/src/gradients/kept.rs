@@ -66,6 +66,16 @@ impl Key {
             us,
         }
     }
+
+    /// The hash the key was made with.
+    pub(crate) fn hash(&self) -> u64 {
+        self.hash
+    }
+
+    /// Bytes of the key's arrays.
+    pub(crate) fn heap_bytes(&self) -> usize {
+        8 * (self.params.len() + self.x0.len() + self.us.len())
+    }
 }
 
 struct Kept {

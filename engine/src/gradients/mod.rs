@@ -36,6 +36,7 @@
 //! is non-zero only on its support, so a Jacobian is formed from `min(ny, nz)` solves (transposed
 //! when there are fewer outputs than inputs) and sparse products.
 pub mod flat;
+pub mod hints;
 pub mod kept;
 mod partials;
 mod rollout;
