@@ -34,6 +34,7 @@ fn main() {
         let ctrls: Vec<Vec<f64>> = (0..steps).map(|_| controls.next(&model)).collect();
         let (mut its, mut failed, mut subdivided, mut active, mut loaded) =
             (Vec::new(), 0, 0, 0, 0);
+        let mut limits = 0;
         let t0 = Instant::now();
         for ctrl in &ctrls {
             let r = step(&model, &mut state, &mut ws, ctrl).unwrap();
@@ -41,6 +42,7 @@ fn main() {
             failed += usize::from(!r.status.is_success());
             subdivided += usize::from(r.subdivisions > 1);
             active += ws.active_contacts();
+            limits += ws.active_limits();
             loaded += state
                 .contact_impulse(&model)
                 .chunks(3)
@@ -56,13 +58,13 @@ fn main() {
                 print = print.rotate_left(5) ^ x.to_bits();
             }
         }
-        last = Some((its, failed, subdivided, active, loaded, print));
+        last = Some((its, failed, subdivided, active, loaded, limits, print));
     }
-    let (mut its, failed, subdivided, active, loaded, print) = last.unwrap();
+    let (mut its, failed, subdivided, active, loaded, limits, print) = last.unwrap();
     let total: usize = its.iter().sum();
     its.sort_unstable();
     println!(
-        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {} (capped at 100: mean {:.2}); unconverged {failed}, subdivided {subdivided}; active candidates {:.1} of {} ({:.1} with a normal impulse); state fingerprint {print:016x}",
+        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {} (capped at 100: mean {:.2}); unconverged {failed}, subdivided {subdivided}; active candidates {:.1} of {} ({:.1} with a normal impulse); limited joints active {:.1}; state fingerprint {print:016x}",
         1e3 * best / steps as f64,
         total as f64 / steps as f64,
         its[steps / 2],
@@ -71,5 +73,6 @@ fn main() {
         active as f64 / steps as f64,
         model.ncontact(),
         loaded as f64 / steps as f64,
+        limits as f64 / steps as f64,
     );
 }

@@ -430,9 +430,13 @@ pub struct Workspace {
     /// The right-hand sides of the Jacobians' transposed solves, `rows × outputs` row-major;
     /// zero between uses (a use clears the rows it wrote), so it is sized once per workspace.
     pub(crate) jacobian_rhs: Vec<f64>,
-    /// Whether each contact candidate takes part in the current step (see
-    /// [`crate::Options::activation_margin`]); inactive ones carry no impulse and no solver work.
+    /// Whether each contact candidate, then each joint's limits (index `ncontact + j`), take
+    /// part in the current step (see [`crate::Options::activation_margin`]); inactive ones
+    /// carry no impulse and no solver work.
     pub(crate) active: Vec<bool>,
+    /// Per limited dof (`limit_adr`): its slacks `(θ - lo, hi - θ)` at the step's start, what an
+    /// inactive limit keeps in its slack variables.
+    pub(crate) limit_slack_now: Vec<[f64; 2]>,
     /// Per candidate: the unit direction (contact tangent frame) along which its friction is
     /// held on the cone's boundary after the interior-point solve (see
     /// `solver::saturation`); `None` for complementarity rows.
@@ -597,7 +601,20 @@ impl Workspace {
     /// them before the first step); the others were farther than the step's reach and carried
     /// no impulse (see [`crate::Options::activation_margin`]).
     pub fn active_contacts(&self) -> usize {
-        self.active.iter().filter(|&&a| a).count()
+        self.contact_active().iter().filter(|&&a| a).count()
+    }
+
+    /// Joints whose limits took part in the last step (see [`Self::active_contacts`]; a limit
+    /// is active when its coordinate is within reach of a bound).
+    pub fn active_limits(&self) -> usize {
+        let total = self.limit_slack_now.len();
+        let ends = self.limit_adr.iter().skip(1).copied().chain([total]);
+        let joints = self.limit_adr.iter().zip(ends);
+        self.active[self.saturated.len()..]
+            .iter()
+            .zip(joints)
+            .filter(|&(&a, (&start, end))| a && end > start)
+            .count()
     }
 
     /// Contacts whose friction the last step held on its cone's boundary, saturated and
@@ -608,7 +625,7 @@ impl Workspace {
 
     /// Per candidate, whether it took part in the last step (see [`Self::active_contacts`]).
     pub fn contact_active(&self) -> &[bool] {
-        &self.active
+        &self.active[..self.saturated.len()]
     }
 
     /// Record every interior-point iteration of the following steps (allocates; for studies
@@ -654,7 +671,8 @@ impl Workspace {
             limit_dtheta: vec![[0.0; 12]; nlim],
             delta_aff: vec![0.0; n],
             jacobian_rhs: Vec::new(),
-            active: vec![true; model.ncontact()],
+            active: vec![true; model.ncontact() + model.njoint()],
+            limit_slack_now: vec![[1.0; 2]; nlim],
             saturated: vec![None; model.ncontact()],
             blocking: vec![false; model.ncontact() + model.joints.len()],
             matrix: BlockMatrix::new(&t.pattern),

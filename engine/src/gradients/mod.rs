@@ -296,7 +296,7 @@ impl StoredSolution {
 
 /// The frozen features of the active contact candidates of `ws`.
 fn active_frozen(ws: &Workspace) -> Vec<(usize, Option<Frozen>)> {
-    crate::solver::inequality::active_candidates(&ws.active)
+    crate::solver::inequality::active_candidates(ws.contact_active())
         .map(|c| (c, ws.frozen[c]))
         .collect()
 }

@@ -264,7 +264,7 @@ impl<'a> Probe<'a> {
         let model = self.perturbed.as_ref().unwrap_or(self.base);
         newton::prepare_forces(model, &self.state, &mut self.ws, &self.ctrl, &forces);
         let active = std::mem::take(&mut self.ws.active);
-        for c in crate::solver::inequality::active_candidates(&active) {
+        for c in crate::solver::inequality::active_candidates(&active[..model.ncontact()]) {
             let (state, f) = (&self.state, self.frozen[c]);
             crate::solver::inequality::prepare_candidate_holding(model, state, &mut self.ws, c, f);
         }
@@ -289,7 +289,9 @@ impl<'a> Probe<'a> {
         let (model, state) = (self.perturbed.as_ref().unwrap_or(self.base), &self.state);
         let forces = AppliedForces::default();
         newton::prepare_smooth_forces(model, state, &mut self.ws, &self.ctrl, &forces);
-        self.ws.active.fill(false);
+        let nc = model.ncontact();
+        self.ws.active[..nc].fill(false);
+        self.ws.active[nc..].copy_from_slice(&active[nc..]);
         // the contact frames (and frozen disk rim points) of `inequality::prepare`, for the
         // candidates that move
         for &c in contacts.iter().filter(|&&c| active[c]) {

@@ -65,6 +65,11 @@ pub struct Options {
     /// before. (It became the default once box corners on a box were measured against the
     /// pair's contact face: before, a 1000 kg box on a 1 kg box sank into it and its corners
     /// flickered in and out of the active set, stalling the solve.)
+    ///
+    /// Joint limits are activated likewise: a joint's limits take part when a limited
+    /// coordinate is within `max(activation_margin, 0.1) + 4 h |θ̇|` (rad or m) of a bound at
+    /// the step's start, and the step is solved again if it brought an inactive one within
+    /// `activation_margin / 4` of a bound. `f64::INFINITY` keeps every limit active too.
     pub activation_margin: f64,
     /// Central-path parameter at which gradients are taken (`None`: the exact derivative at the
     /// simulated solution). The step itself is always solved to `kappa_tol`; see

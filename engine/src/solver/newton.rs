@@ -347,21 +347,37 @@ fn copy_live_rows(model: &Model, active: &[bool], src: &[f64], dst: &mut [f64]) 
     for_each_live_range(model, active, |r| dst[r.clone()].copy_from_slice(&src[r]));
 }
 
-/// The row ranges of everything but the inactive contact candidates.
+/// The row ranges of everything but the inactive contact candidates and joint limits.
 pub(crate) fn for_each_live_range(
     model: &Model,
     active: &[bool],
     mut f: impl FnMut(std::ops::Range<usize>),
 ) {
-    let p = &model.topology.pattern;
+    let t = &model.topology;
+    let p = &t.pattern;
     // layout: bodies, joints, couplings, limits | contacts | tendon limits
-    let nodes = &model.topology.contact_node;
-    let (Some(&first), Some(&last)) = (nodes.first(), nodes.last()) else {
-        f(0..p.total_dim());
+    let nodes = &t.contact_node;
+    let nc = nodes.len();
+    let head = nodes.first().map_or(p.total_dim(), |&n| p.offset(n));
+    // the head without the inactive limits' nodes (in joint order, increasing offsets)
+    let mut start = 0;
+    for (j, n) in t.limit_node.iter().enumerate() {
+        if let (Some(n), false) = (*n, super::inequality::limit_on(active, nc + j)) {
+            debug_assert!(p.offset(n) >= start && p.offset(n) < head);
+            if p.offset(n) > start {
+                f(start..p.offset(n));
+            }
+            start = p.offset(n) + p.dim(n);
+        }
+    }
+    if head > start {
+        f(start..head);
+    }
+    let Some(&last) = nodes.last() else {
         return;
     };
-    f(0..p.offset(first));
-    for n in super::inequality::active_candidates(active).map(|c| nodes[c]) {
+    let contacts = &active[..nc.min(active.len())];
+    for n in super::inequality::active_candidates(contacts).map(|c| nodes[c]) {
         f(p.offset(n)..p.offset(n) + p.dim(n));
     }
     f(p.offset(last) + p.dim(last)..p.total_dim());
@@ -746,6 +762,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             break;
         }
         let missed = super::inequality::missed_contacts(model, ws)
+            + super::inequality::missed_limits(model, ws)
             + super::inequality::refreeze_disks(model, ws);
         if missed == 0 {
             break;
@@ -1113,6 +1130,7 @@ mod tests {
         crate::set_minimal(&model, &mut state, &[0.1, 0.5, -0.2], &[0.3, -2.0, 0.7]).unwrap();
         let mut ws = Workspace::new(&model);
         prepare(&model, &state, &mut ws, &[], &AppliedForces::default());
+        ws.active[model.ncontact()..].fill(true); // the limit takes part even far from its bounds
         let t = &model.topology;
         let (lim, ten) = (
             t.pattern.offset(t.limit_node[1].unwrap()),
@@ -1271,6 +1289,8 @@ mod tests {
         crate::set_minimal(&model, &mut state, &qpos, &qvel).unwrap();
         let mut ws = Workspace::new(&model);
         prepare(&model, &state, &mut ws, &[], &AppliedForces::default());
+        // every joint limit takes part (far ones are left out of a step)
+        ws.active[model.ncontact()..].fill(true);
         // move the iterate away from the state so every block is generic
         for (i, w) in ws.w.iter_mut().enumerate() {
             // stay inside the cones: perturb, then keep positive
