@@ -70,6 +70,10 @@ pub(crate) struct Topology {
     /// Whether the step has inequality variables (contacts, joint or tendon limits):
     /// interior-point path.
     pub has_cones: bool,
+    /// Complementarity pairs of the whole problem (orthant pairs and second-order cones of
+    /// every contact candidate, joint limit and tendon limit): what the solver's mean
+    /// complementarity divides by.
+    pub cone_degree: usize,
     /// Rows of bodies, joints and couplings (the inequality nodes follow them).
     pub smooth_dim: usize,
 }
@@ -271,6 +275,7 @@ impl Topology {
             joint_diag,
             blocks,
             has_cones: cone_degree > 0,
+            cone_degree,
             limit_node,
             limit_blocks,
             coupling_node,

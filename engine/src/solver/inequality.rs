@@ -505,7 +505,8 @@ const LIMIT_REACH: f64 = 0.1;
 /// without limits). The reach: with the activation margin (0.01) and `2 h |θ̇|`, 19 of the
 /// humanoid's 300 steps (seed 5) moved an inactive limit's coordinate to its bound and were
 /// solved again; with 0.1 and `4 h |θ̇|`, none. The mean complementarity still counts the
-/// inactive limits' pairs ([`mean_complementarity`]). `step_bench`, 8 seeds × 300 steps:
+/// inactive limits' pairs ([`mean_complementarity`]; left out, the humanoid took 21.11
+/// instead of 19.65 iterations per step, counted 19.06). `step_bench`, 8 seeds × 300 steps:
 /// humanoid 19.65 → 19.06 iterations per step, A1 15.97 → 15.34, and 17% and 32% less time
 /// per step (BENCHMARKS.md, session 19). A step that moves a coordinate past this reach is
 /// caught by [`missed_limits`] and solved again.
@@ -1184,8 +1185,20 @@ pub(crate) fn cone_search(
     alpha
 }
 
-/// Mean complementarity `μ = Σ bᵀc / deg(K)` at `w + α Δ` (eqs. 52-53), over the active
-/// cones only (`deg(K)` counts the pairs visited).
+/// Mean complementarity `μ = Σ bᵀc / deg(K)` at `w + α Δ` (eqs. 52-53) over every pair of the
+/// problem: inactive contact candidates and joint limits are exactly complementary (no impulse,
+/// product 0), so the sum runs over the active pairs and `deg(K)` is the whole problem's
+/// ([`crate::model::topology::Topology::cone_degree`]).
+///
+/// Why the whole problem's degree: dividing by the active pairs only made the centring target
+/// `σμ` tens of times larger on robots whose activation leaves most pairs out (the A1's 1024
+/// candidates, ~5 active), and the Panda's finger-pad steps stalled with μ creeping down from
+/// 1e-5 until a retry with every candidate active converged at once. `step_bench MODEL 300 1
+/// SEED`, seeds 5..12, mean iterations per step (capped at 100): Panda 12.06 (6.96) → 7.87
+/// (6.80), A1 15.34 (15.14) → 14.20 (14.19), humanoid 19.06 (18.20) → 17.11 (16.77) (counting
+/// each inactive candidate as one pair; BENCHMARKS.md, session 19). A constant tenfold smaller
+/// target `σμ/10` did as well on these (7.80, 14.60, 16.70) but moves every scene; with every
+/// pair active this is the mean it always was.
 pub(crate) fn mean_complementarity(
     model: &Model,
     active: &[bool],
@@ -1194,23 +1207,12 @@ pub(crate) fn mean_complementarity(
     alpha: f64,
 ) -> f64 {
     let mut sum = 0.0;
-    let mut degree = 0usize;
     let at = |i: usize| w[i] + alpha * delta[i];
     for_each_pair(model, active, |o, p, d, _, soc| {
         let n = if soc { 3 } else { 1 };
         sum += (0..n).map(|i| at(o + p + i) * at(o + d + i)).sum::<f64>();
-        degree += 1;
     });
-    // inactive limits count as the complementary pairs they are, with product 0: the mean the
-    // centring was tuned with while every limit took part (left out, the humanoid took 21.11
-    // instead of 19.65 iterations per step; counted, 19.06; `activate_limits`)
-    let nc = model.ncontact();
-    for (j, joint) in model.joints.iter().enumerate() {
-        if model.topology.limit_node[j].is_some() && !limit_on(active, nc + j) {
-            degree += 2 * joint.limits.len();
-        }
-    }
-    sum / degree.max(1) as f64
+    sum / model.topology.cone_degree.max(1) as f64
 }
 
 /// Nesterov–Todd scalings of the active friction cones at the iterate `ws.w` (see
