@@ -430,12 +430,13 @@ pub struct Workspace {
     /// The right-hand sides of the Jacobians' transposed solves, `rows × outputs` row-major;
     /// zero between uses (a use clears the rows it wrote), so it is sized once per workspace.
     pub(crate) jacobian_rhs: Vec<f64>,
-    /// Whether each contact candidate, then each joint's limits (index `ncontact + j`), take
-    /// part in the current step (see [`crate::Options::activation_margin`]); inactive ones
-    /// carry no impulse and no solver work.
+    /// Whether each contact candidate, then each joint's limits (index `ncontact + j`), then
+    /// each tendon limit (`ncontact + njoint + k`) take part in the current step (see
+    /// [`crate::Options::activation_margin`]); inactive ones carry no impulse and no solver
+    /// work.
     pub(crate) active: Vec<bool>,
-    /// Per limited dof (`limit_adr`): its slacks `(θ - lo, hi - θ)` at the step's start, what an
-    /// inactive limit keeps in its slack variables.
+    /// Per limited dof (`limit_adr`), then per tendon limit: its slacks `(q - lo, hi - q)` at
+    /// the step's start, what an inactive limit keeps in its slack variables.
     pub(crate) limit_slack_now: Vec<[f64; 2]>,
     /// Per candidate: the unit direction (contact tangent frame) along which its friction is
     /// held on the cone's boundary after the interior-point solve (see
@@ -607,14 +608,21 @@ impl Workspace {
     /// Joints whose limits took part in the last step (see [`Self::active_contacts`]; a limit
     /// is active when its coordinate is within reach of a bound).
     pub fn active_limits(&self) -> usize {
-        let total = self.limit_slack_now.len();
+        let (nj, nt) = (self.limit_adr.len(), self.tendon_active().len());
+        let total = self.limit_slack_now.len() - nt;
         let ends = self.limit_adr.iter().skip(1).copied().chain([total]);
         let joints = self.limit_adr.iter().zip(ends);
-        self.active[self.saturated.len()..]
+        let nc = self.saturated.len();
+        self.active[nc..nc + nj]
             .iter()
             .zip(joints)
             .filter(|&(&a, (&start, end))| a && end > start)
             .count()
+    }
+
+    /// Per tendon limit, whether it took part in the last step (see [`Self::active_limits`]).
+    pub fn tendon_active(&self) -> &[bool] {
+        &self.active[self.saturated.len() + self.limit_adr.len()..]
     }
 
     /// Contacts whose friction the last step held on its cone's boundary, saturated and
@@ -671,8 +679,8 @@ impl Workspace {
             limit_dtheta: vec![[0.0; 12]; nlim],
             delta_aff: vec![0.0; n],
             jacobian_rhs: Vec::new(),
-            active: vec![true; model.ncontact() + model.njoint()],
-            limit_slack_now: vec![[1.0; 2]; nlim],
+            active: vec![true; model.ncontact() + model.njoint() + model.tendon_limits.len()],
+            limit_slack_now: vec![[1.0; 2]; nlim + model.tendon_limits.len()],
             saturated: vec![None; model.ncontact()],
             blocking: vec![false; model.ncontact() + model.joints.len()],
             matrix: BlockMatrix::new(&t.pattern),

@@ -66,9 +66,10 @@ pub struct Options {
     /// pair's contact face: before, a 1000 kg box on a 1 kg box sank into it and its corners
     /// flickered in and out of the active set, stalling the solve.)
     ///
-    /// Joint limits are activated likewise: a joint's limits take part when a limited
-    /// coordinate is within `max(activation_margin, 0.1) + 4 h |θ̇|` (rad or m) of a bound at
-    /// the step's start, and the step is solved again if it brought an inactive one within
+    /// Joint and tendon limits are activated likewise: a joint's limits take part when a
+    /// limited coordinate is within `max(activation_margin, 0.1) + 4 h |θ̇|` (rad or m) of a
+    /// bound at the step's start (a tendon limit: its length, with the rate bound
+    /// `Σ |coef q̇|`), and the step is solved again if it brought an inactive one within
     /// `activation_margin / 4` of a bound. `f64::INFINITY` keeps every limit active too.
     pub activation_margin: f64,
     /// Central-path parameter at which gradients are taken (`None`: the exact derivative at the

@@ -99,7 +99,11 @@ pub(crate) fn for_each_owned_pair(
             }
         }
     }
-    for &n in &t.tendon_node {
+    let tendons = nc + model.njoint();
+    for (k, &n) in t.tendon_node.iter().enumerate() {
+        if !limit_on(active, tendons + k) {
+            continue;
+        }
         for &(p, d, r) in &LIMIT_PAIRS {
             f(None, t.pattern.offset(n), p, d, r, false);
         }
@@ -189,6 +193,14 @@ pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm:
             let x = &mut x[..4 * joint.limits.len()];
             inactive_limit_vars(ws, j, joint.limits.len(), x);
             ws.w[o..o + x.len()].copy_from_slice(x);
+        }
+    }
+    let nl = ws.limit_slack_now.len() - t.tendon_node.len();
+    for (k, &n) in t.tendon_node.iter().enumerate() {
+        if !ws.active[nc + model.njoint() + k] {
+            let [lo, hi] = ws.limit_slack_now[nl + k];
+            let o = t.pattern.offset(n);
+            ws.w[o..o + 4].copy_from_slice(&[0.0, lo, 0.0, hi]);
         }
     }
     // other node entries (the ψ-slack pairs are covered above; nothing else is free)
@@ -465,7 +477,8 @@ pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace, reach: 
         let nc = model.ncontact();
         let limits = (0..model.njoint())
             .filter(|&j| model.topology.limit_node[j].is_some() && !ws.active[nc + j])
-            .count();
+            .count()
+            + ws.tendon_active().iter().filter(|a| !**a).count();
         ws.active.fill(true);
         return nc - before + limits;
     }
@@ -495,8 +508,9 @@ const LIMIT_REACH: f64 = 0.1;
 
 /// Activate the limits of every joint with a limited coordinate within `max(activation_margin,
 /// LIMIT_REACH) + 4 h |θ̇|` of a bound at the step's start (θ̇ the joint's current rate); with
-/// [`Reach::Bound`], every limited joint. Records every limited dof's slacks at the step's
-/// start (`limit_slack_now`). Returns how many joints it added.
+/// [`Reach::Bound`], every limited joint. Tendon limits likewise, by their length `Σ coef q`
+/// and the rate bound `Σ |coef q̇|`. Records every limit's slacks at the step's start
+/// (`limit_slack_now`). Returns how many joints and tendon limits it added.
 ///
 /// Why: a limit far from its bounds carries no impulse, but as a node of the Newton system it
 /// cost its assembly, factorisation and line-search evaluations in every iteration: on the
@@ -540,6 +554,36 @@ fn activate_limits(model: &Model, state: &State, ws: &mut Workspace, reach: Reac
             added += 1;
         }
     }
+    // tendon limits: the length `L = Σ coef q` and a bound on its rate, `Σ |coef| |q̇|`
+    let (nl, nj) = (
+        ws.limit_slack_now.len() - model.tendon_limits.len(),
+        model.njoint(),
+    );
+    for (k, tendon) in model.tendon_limits.iter().enumerate() {
+        let (mut len, mut rate) = (0.0, 0.0);
+        for &(ji, dof, coef) in &tendon.terms {
+            let joint = &model.joints[ji];
+            let frame = JointFrame::new(
+                joint,
+                &pose_of(state, joint.parent),
+                &pose_of(state, joint.child),
+            );
+            let (mut q, mut qd) = ([0.0; 7], [0.0; 6]);
+            frame.coordinates(joint, &mut q[..joint.nq()]);
+            joint_qvel_in_frame(state, joint, &frame, &mut qd[..joint.nfree()]);
+            len += coef * q[dof];
+            rate += (coef * qd[dof]).abs();
+        }
+        let (lo, hi) = tendon.range;
+        let slack = [len - lo, hi - len];
+        ws.limit_slack_now[nl + k] = slack;
+        let within = margin.max(LIMIT_REACH) + 4.0 * h * rate;
+        let near = reach == Reach::Bound || !(slack[0] > within && slack[1] > within);
+        if near && !ws.active[nc + nj + k] {
+            ws.active[nc + nj + k] = true;
+            added += 1;
+        }
+    }
     added
 }
 
@@ -571,6 +615,18 @@ pub(crate) fn missed_limits(model: &Model, ws: &mut Workspace) -> usize {
             .any(|&(dof, lo, hi)| !(q[dof] - lo > floor && hi - q[dof] > floor));
         if near {
             ws.active[nc + j] = true;
+            n += 1;
+        }
+    }
+    let nj = model.njoint();
+    for k in 0..model.tendon_limits.len() {
+        if ws.active[nc + nj + k] {
+            continue;
+        }
+        let len = super::tendon::next_length(model, ws, k);
+        let (lo, hi) = model.tendon_limits[k].range;
+        if !(len - lo > floor && hi - len > floor) {
+            ws.active[nc + nj + k] = true;
             n += 1;
         }
     }
@@ -923,8 +979,10 @@ fn violations(
             }
         }
     }
-    for &n in &t.tendon_node {
-        eq(t.pattern.offset(n), &[0, 2], residual, &mut rvio);
+    for (k, &n) in t.tendon_node.iter().enumerate() {
+        if limit_on(active, nc + model.njoint() + k) {
+            eq(t.pattern.offset(n), &[0, 2], residual, &mut rvio);
+        }
     }
     (rvio, kvio)
 }
@@ -1319,9 +1377,16 @@ pub(crate) fn store(model: &Model, state: &mut State, ws: &Workspace) {
         }
         k += dim;
     }
-    for &n in &t.tendon_node {
+    let nl = ws.limit_slack_now.len() - t.tendon_node.len();
+    for (i, &n) in t.tendon_node.iter().enumerate() {
         let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
-        state.ineq_vars[k..k + dim].copy_from_slice(&ws.w[o..o + dim]);
+        let x = &mut state.ineq_vars[k..k + dim];
+        if ws.active[nc + model.njoint() + i] {
+            x.copy_from_slice(&ws.w[o..o + dim]);
+        } else {
+            let [lo, hi] = ws.limit_slack_now[nl + i];
+            x.copy_from_slice(&[0.0, lo, 0.0, hi]);
+        }
         k += dim;
     }
 }

@@ -347,40 +347,51 @@ fn copy_live_rows(model: &Model, active: &[bool], src: &[f64], dst: &mut [f64]) 
     for_each_live_range(model, active, |r| dst[r.clone()].copy_from_slice(&src[r]));
 }
 
-/// The row ranges of everything but the inactive contact candidates and joint limits.
+/// The row ranges of everything but the inactive contact candidates, joint limits and tendon
+/// limits.
 pub(crate) fn for_each_live_range(
     model: &Model,
     active: &[bool],
     mut f: impl FnMut(std::ops::Range<usize>),
 ) {
+    use super::inequality::limit_on;
     let t = &model.topology;
     let p = &t.pattern;
     // layout: bodies, joints, couplings, limits | contacts | tendon limits
     let nodes = &t.contact_node;
-    let nc = nodes.len();
-    let head = nodes.first().map_or(p.total_dim(), |&n| p.offset(n));
-    // the head without the inactive limits' nodes (in joint order, increasing offsets)
+    let (nc, nj) = (nodes.len(), t.limit_node.len());
     let mut start = 0;
+    // the rows from `start` up to inactive node `n`, then past it
+    let skip = |n: usize, start: &mut usize, f: &mut dyn FnMut(std::ops::Range<usize>)| {
+        debug_assert!(p.offset(n) >= *start);
+        if p.offset(n) > *start {
+            f(*start..p.offset(n));
+        }
+        *start = p.offset(n) + p.dim(n);
+    };
     for (j, n) in t.limit_node.iter().enumerate() {
-        if let (Some(n), false) = (*n, super::inequality::limit_on(active, nc + j)) {
-            debug_assert!(p.offset(n) >= start && p.offset(n) < head);
-            if p.offset(n) > start {
-                f(start..p.offset(n));
-            }
-            start = p.offset(n) + p.dim(n);
+        if let (Some(n), false) = (*n, limit_on(active, nc + j)) {
+            skip(n, &mut start, &mut f);
         }
     }
-    if head > start {
-        f(start..head);
+    if let (Some(&first), Some(&last)) = (nodes.first(), nodes.last()) {
+        if p.offset(first) > start {
+            f(start..p.offset(first));
+        }
+        let contacts = &active[..nc.min(active.len())];
+        for n in super::inequality::active_candidates(contacts).map(|c| nodes[c]) {
+            f(p.offset(n)..p.offset(n) + p.dim(n));
+        }
+        start = p.offset(last) + p.dim(last);
     }
-    let Some(&last) = nodes.last() else {
-        return;
-    };
-    let contacts = &active[..nc.min(active.len())];
-    for n in super::inequality::active_candidates(contacts).map(|c| nodes[c]) {
-        f(p.offset(n)..p.offset(n) + p.dim(n));
+    for (k, &n) in t.tendon_node.iter().enumerate() {
+        if !limit_on(active, nc + nj + k) {
+            skip(n, &mut start, &mut f);
+        }
     }
-    f(p.offset(last) + p.dim(last)..p.total_dim());
+    if p.total_dim() > start {
+        f(start..p.total_dim());
+    }
 }
 
 /// Subtract κ from every complementarity row (what `inequality::evaluate` does for `kappa`);

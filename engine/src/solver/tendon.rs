@@ -22,7 +22,7 @@ fn next(ws: &Workspace, b: usize) -> Pose {
 }
 
 /// Length of tendon limit `t` at the next configuration (`ws.next_pose`).
-fn next_length(model: &Model, ws: &Workspace, t: usize) -> f64 {
+pub(crate) fn next_length(model: &Model, ws: &Workspace, t: usize) -> f64 {
     model.tendon_limits[t].length(|ji, dof| {
         let j = &model.joints[ji];
         coordinate(model, ji, dof, &next(ws, j.parent), &next(ws, j.child)).0
@@ -33,8 +33,14 @@ fn next_length(model: &Model, ws: &Workspace, t: usize) -> f64 {
 /// on the body rows (needs `ws.next_pose` and the current free Jacobians).
 pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut [f64]) {
     let t = &model.topology;
+    let first = model.ncontact() + model.njoint();
     for (k, tendon) in model.tendon_limits.iter().enumerate() {
         let o = t.pattern.offset(t.tendon_node[k]);
+        if !ws.active[first + k] {
+            // an inactive limit: no impulse, its variables fixed (rows `w - w₀ = 0`)
+            residual[o..o + 4].fill(0.0);
+            continue;
+        }
         let (lo, hi) = tendon.range;
         let len = next_length(model, ws, k);
         let x = &w[o..o + 4];
@@ -63,8 +69,17 @@ pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut 
 /// slack rows' `∂L(x⁺)/∂w_b` (chain rule through the step map) and the body rows' `∓coef J_fᵀ`.
 pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
     let t = &model.topology;
+    let first = model.ncontact() + model.njoint();
     for (k, tendon) in model.tendon_limits.iter().enumerate() {
         let n = t.tendon_node[k];
+        // an inactive limit's node keeps the identity row and column
+        let active = ws.active[first + k];
+        if ws.matrix.is_skipped(n) == active {
+            ws.matrix.set_skipped(&t.pattern, n, !active);
+        }
+        if !active {
+            continue;
+        }
         let o = t.pattern.offset(n);
         let x = &w[o..o + 4];
         if let Some(diag) = t.pattern.block(n, n) {
