@@ -468,8 +468,8 @@ fn bounding_radius(shape: &crate::contact::geometry::Shape) -> f64 {
 /// closes a gap faster than this estimate (a swinging box corner, an impulsive actuator) is
 /// caught by [`missed_contacts`] and re-solved; a solve that fails is solved again with the
 /// candidates of [`Reach::Bound`], then with all of them.
-/// Joint limits are activated likewise ([`activate_limits`]). Returns how many candidates and
-/// limited joints it added.
+/// Joint and tendon limits are activated likewise ([`activate_limits`]). Returns how many
+/// candidates, limited joints and tendon limits it added.
 pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace, reach: Reach) -> usize {
     let margin = model.options.activation_margin;
     let before = ws.active_contacts();
