@@ -9,17 +9,7 @@ use ukemi_engine::{
 
 #[test]
 fn limit_holds_and_releases() {
-    let mut j = JointSpec::new("hinge", JointKind::Revolute, "world", "bob")
-        .axis([0.0, 1.0, 0.0])
-        .anchors([0.0; 3], [0.0, 0.0, 1.0]);
-    j.range = Some(vec![(-0.5, 0.5)]);
-    let model = ModelBuilder::new()
-        .timestep(0.01)
-        .body(BodySpec::new("bob", 1.0, [1e-3; 3]).pos([0.0, 0.0, -1.0]))
-        .joint(j)
-        .actuator(ActuatorSpec::motor("m", "hinge", 0, 1.0))
-        .compile()
-        .unwrap();
+    let model = limited_pendulum(-0.5, 0.5, |_| {});
     assert_eq!(model.variable_counts()[2], ("joint_limit", 4));
     let mut state = State::reference(&model);
     set_minimal(&model, &mut state, &[0.3], &[3.0]).unwrap();

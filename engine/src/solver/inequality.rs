@@ -525,29 +525,24 @@ const LIMIT_REACH: f64 = 0.1;
 /// per step (BENCHMARKS.md, session 19). A step that moves a coordinate past this reach is
 /// caught by [`missed_limits`] and solved again.
 fn activate_limits(model: &Model, state: &State, ws: &mut Workspace, reach: Reach) -> usize {
-    use crate::joints::coordinates::{joint_qvel_in_frame, pose_of};
     let (margin, h) = (model.options.activation_margin, model.options.timestep);
+    // NaN coordinates or rates stay active (the solve then reports them)
+    let within_reach = |slack: [f64; 2], rate: f64| {
+        let within = margin.max(LIMIT_REACH) + 4.0 * h * rate;
+        !(slack[0] > within && slack[1] > within)
+    };
     let nc = model.ncontact();
     let mut added = 0;
     for (j, joint) in model.joints.iter().enumerate() {
         if model.topology.limit_node[j].is_none() {
             continue;
         }
-        let frame = JointFrame::new(
-            joint,
-            &pose_of(state, joint.parent),
-            &pose_of(state, joint.child),
-        );
-        let (mut q, mut qd) = ([0.0; 7], [0.0; 6]);
-        frame.coordinates(joint, &mut q[..joint.nq()]);
-        joint_qvel_in_frame(state, joint, &frame, &mut qd[..joint.nfree()]);
+        let (q, qd) = joint_state(state, joint);
         let mut near = reach == Reach::Bound;
         for (i, &(dof, lo, hi)) in joint.limits.iter().enumerate() {
             let slack = [q[dof] - lo, hi - q[dof]];
             ws.limit_slack_now[ws.limit_adr[j] + i] = slack;
-            let within = margin.max(LIMIT_REACH) + 4.0 * h * qd[dof].abs();
-            // NaN coordinates or rates stay active (the solve then reports them)
-            near |= !(slack[0] > within && slack[1] > within);
+            near |= within_reach(slack, qd[dof].abs());
         }
         if near && !ws.active[nc + j] {
             ws.active[nc + j] = true;
@@ -562,29 +557,34 @@ fn activate_limits(model: &Model, state: &State, ws: &mut Workspace, reach: Reac
     for (k, tendon) in model.tendon_limits.iter().enumerate() {
         let (mut len, mut rate) = (0.0, 0.0);
         for &(ji, dof, coef) in &tendon.terms {
-            let joint = &model.joints[ji];
-            let frame = JointFrame::new(
-                joint,
-                &pose_of(state, joint.parent),
-                &pose_of(state, joint.child),
-            );
-            let (mut q, mut qd) = ([0.0; 7], [0.0; 6]);
-            frame.coordinates(joint, &mut q[..joint.nq()]);
-            joint_qvel_in_frame(state, joint, &frame, &mut qd[..joint.nfree()]);
+            let (q, qd) = joint_state(state, &model.joints[ji]);
             len += coef * q[dof];
             rate += (coef * qd[dof]).abs();
         }
         let (lo, hi) = tendon.range;
         let slack = [len - lo, hi - len];
         ws.limit_slack_now[nl + k] = slack;
-        let within = margin.max(LIMIT_REACH) + 4.0 * h * rate;
-        let near = reach == Reach::Bound || !(slack[0] > within && slack[1] > within);
+        let near = reach == Reach::Bound || within_reach(slack, rate);
         if near && !ws.active[nc + nj + k] {
             ws.active[nc + nj + k] = true;
             added += 1;
         }
     }
     added
+}
+
+/// Coordinates and rates of `joint` at `state`.
+fn joint_state(state: &State, joint: &crate::joints::Joint) -> ([f64; 7], [f64; 6]) {
+    use crate::joints::coordinates::{joint_qvel_in_frame, pose_of};
+    let frame = JointFrame::new(
+        joint,
+        &pose_of(state, joint.parent),
+        &pose_of(state, joint.child),
+    );
+    let (mut q, mut qd) = ([0.0; 7], [0.0; 6]);
+    frame.coordinates(joint, &mut q[..joint.nq()]);
+    joint_qvel_in_frame(state, joint, &frame, &mut qd[..joint.nfree()]);
+    (q, qd)
 }
 
 /// After a solve with some joint limits inactive: activate those of every joint with a limited
