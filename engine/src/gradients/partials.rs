@@ -328,20 +328,45 @@ impl<'a> Probe<'a> {
     }
 }
 
-/// Bodies whose pose (`moved`) or pose or velocity (`touched`) differ between two states.
-fn changed_bodies(model: &Model, a: &State, b: &State) -> (Vec<usize>, Vec<usize>) {
-    let (mut touched, mut moved) = (Vec::new(), Vec::new());
-    for k in 1..model.nbody() {
-        let (pa, pb) = (a.pose(k), b.pose(k));
-        let pose = pa.pos != pb.pos || pa.quat != pb.quat;
-        if pose {
-            moved.push(k);
+/// The bodies below each joint: its child and every body whose forward kinematics follows it
+/// (empty for a loop joint), in body order.
+fn subtrees(model: &Model) -> Vec<Vec<usize>> {
+    let fk = &model.topology.fk_order;
+    (0..model.njoint())
+        .map(|ji| {
+            let mut below = vec![false; model.nbody()];
+            for &k in fk {
+                let j = &model.joints[k];
+                below[j.child] |= k == ji || below[j.parent];
+            }
+            (1..model.nbody()).filter(|&b| below[b]).collect()
+        })
+        .collect()
+}
+
+/// Bodies whose pose or velocity (`touched`) or pose (`moved`) a perturbation of state tangent
+/// direction `i` changes: in minimal coordinates those below the dof's joint (its coordinates
+/// move their poses and velocities, its rate their velocities), in maximal ones the direction's
+/// own body. What perturbing the state and comparing would find, known from the tree.
+fn state_bodies(
+    model: &Model,
+    coords: Coordinates,
+    below: &[Vec<usize>],
+    i: usize,
+) -> (Vec<usize>, Vec<usize>) {
+    let (bodies, pose) = match coords {
+        Coordinates::Minimal => {
+            let nv = model.nv;
+            let ji = model.joints.iter().position(|j| {
+                !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&(i % nv))
+            });
+            (ji.map_or_else(Vec::new, |ji| below[ji].clone()), i < nv)
         }
-        if pose || a.velocity(k) != b.velocity(k) {
-            touched.push(k);
-        }
-    }
-    (touched, moved)
+        // 12 per body: position, rotation, velocity, angular velocity
+        Coordinates::Maximal => (vec![i / 12 + 1], i % 12 < 6),
+    };
+    let moved = if pose { bodies.clone() } else { Vec::new() };
+    (bodies, moved)
 }
 
 /// Central-difference step of each input.
@@ -357,23 +382,17 @@ fn steps(model: &Model, inputs: &[Input]) -> Vec<f64> {
 
 /// Row supports of every input column, and whether the column is light: it changes current
 /// velocities or controls only, so its rows are body rows and the light residual evaluates it.
-fn supports(
-    model: &Model,
-    probe: &mut Probe,
-    inputs: &[Input],
-    eps: &[f64],
-) -> (Vec<Support>, Vec<bool>) {
-    let graph = Interactions::new(model, &probe.ws.active.clone());
+fn supports(model: &Model, probe: &Probe, inputs: &[Input]) -> (Vec<Support>, Vec<bool>) {
+    let graph = Interactions::new(model, &probe.ws.active);
     let all: Vec<usize> = (1..model.nbody()).collect();
+    let below = subtrees(model);
     let mut light = vec![false; inputs.len()];
     let sup = inputs
         .iter()
         .enumerate()
         .map(|(c, input)| match *input {
-            Input::State(_) => {
-                probe.perturb(inputs, eps, &[c], 1.0);
-                let (touched, moved) = changed_bodies(model, &probe.point.state, &probe.state);
-                probe.restore(inputs, &[c]);
+            Input::State(i) => {
+                let (touched, moved) = state_bodies(model, probe.point.coords, &below, i);
                 if moved.is_empty() {
                     light[c] = true;
                     return Support::body_rows(&graph, &touched);
@@ -458,7 +477,7 @@ pub(super) fn partials(
     let groups: Vec<Vec<usize>> = match method {
         PartialsMethod::ColumnByColumn => (0..nz).map(|c| vec![c]).collect(),
         PartialsMethod::Coloured => {
-            let (sup, light) = supports(model, &mut probe, inputs, &eps);
+            let (sup, light) = supports(model, &probe, inputs);
             for (c, s) in sup.iter().enumerate() {
                 out.rows[c] = node_rows(model, &s.nodes);
             }
@@ -727,4 +746,113 @@ fn output_rows(model: &Model, coords: Coordinates) -> Vec<Support> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{BodySpec, JointKind, JointSpec, ModelBuilder, Workspace};
+
+    /// Bodies whose pose (`moved`) or pose or velocity (`touched`) differ between two states.
+    fn changed_bodies(model: &Model, a: &State, b: &State) -> (Vec<usize>, Vec<usize>) {
+        let (mut touched, mut moved) = (Vec::new(), Vec::new());
+        for k in 1..model.nbody() {
+            let (pa, pb) = (a.pose(k), b.pose(k));
+            let pose = pa.pos != pb.pos || pa.quat != pb.quat;
+            if pose {
+                moved.push(k);
+            }
+            if pose || a.velocity(k) != b.velocity(k) {
+                touched.push(k);
+            }
+        }
+        (touched, moved)
+    }
+
+    /// A free base with two branches holding every other joint kind (a welded body among them),
+    /// moving after a few steps under gravity.
+    fn every_kind() -> (Model, State) {
+        use JointKind::*;
+        let kinds = [
+            Revolute,
+            Prismatic,
+            Spherical,
+            Cylindrical,
+            Orbital,
+            Planar,
+            FixedOrientation,
+            Fixed,
+            PlanarAxis,
+            FreeRevolute,
+            PrismaticOrbital,
+            PlanarOrbital,
+            FreeOrbital,
+            CylindricalFree,
+            PlanarFree,
+        ];
+        let mut b = ModelBuilder::new()
+            .timestep(0.01)
+            .body(BodySpec::new("base", 2.0, [0.1, 0.2, 0.3]).pos([0.0, 0.0, 1.0]))
+            .joint(JointSpec::new("root", Floating, "world", "base"));
+        // two branches: even kinds below base along x, odd ones along y, each joint at its
+        // child's origin
+        let pos = |i: usize| {
+            let r = 0.2 * (i / 2 + 1) as f64;
+            if i.is_multiple_of(2) {
+                [r, 0.0, 1.0]
+            } else {
+                [0.0, r, 1.0]
+            }
+        };
+        for (i, kind) in kinds.iter().enumerate() {
+            let (parent, at) = match i {
+                0 | 1 => ("base".to_string(), [0.0, 0.0, 1.0]),
+                _ => (format!("b{}", i - 2), pos(i - 2)),
+            };
+            let (name, p) = (format!("b{i}"), pos(i));
+            let anchor = [p[0] - at[0], p[1] - at[1], p[2] - at[2]];
+            b = b
+                .body(BodySpec::new(&name, 1.0, [0.01, 0.02, 0.03]).pos(p))
+                .joint(
+                    JointSpec::new(&format!("j{i}"), *kind, &parent, &name)
+                        .axis([0.2, 1.0, 0.3])
+                        .anchors(anchor, [0.0; 3]),
+                );
+        }
+        let m = b.compile().unwrap();
+        let mut s = State::reference(&m);
+        let mut ws = Workspace::new(&m);
+        for _ in 0..3 {
+            crate::step(&m, &mut s, &mut ws, &[]).unwrap();
+        }
+        (m, s)
+    }
+
+    /// The bodies a state direction moves, known from the tree, are those perturbing the state
+    /// and comparing finds, for every direction of every joint kind in both coordinates.
+    #[test]
+    fn state_bodies_are_those_a_perturbation_changes() {
+        let (m, s) = every_kind();
+        let below = subtrees(&m);
+        for coords in [Coordinates::Minimal, Coordinates::Maximal] {
+            let p = Point::new(&m, &s, coords).unwrap();
+            let mut scratch = vec![0.0; Point::scratch_len(&m)];
+            for i in 0..coords.dim(&m) {
+                let mut dir = vec![0.0; coords.dim(&m)];
+                dir[i] = 1.0;
+                let mut out = p.state.clone();
+                p.perturbed(&m, &dir, FD_STEP, &mut out, &mut scratch);
+                let found = changed_bodies(&m, &p.state, &out);
+                assert!(
+                    !found.0.is_empty(),
+                    "{coords:?} direction {i} moves nothing"
+                );
+                assert_eq!(
+                    state_bodies(&m, coords, &below, i),
+                    found,
+                    "{coords:?} direction {i}"
+                );
+            }
+        }
+    }
 }

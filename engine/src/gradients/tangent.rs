@@ -192,7 +192,10 @@ impl Point {
                     let (v, w) = self.state.velocity(b);
                     let dv = |k: usize| Vector3::new(d[k], d[k + 1], d[k + 2]) * eps;
                     pose.pos += dv(0);
-                    pose.quat = (pose.quat * exp_rot(&dv(3))).normalize();
+                    // (a velocity direction leaves the orientation's bits as they are)
+                    if d[3..6].iter().any(|&x| x != 0.0) {
+                        pose.quat = (pose.quat * exp_rot(&dv(3))).normalize();
+                    }
                     out.set_pose(b, &pose);
                     out.set_velocity(b, &(v + dv(6)), &(w + dv(9)));
                 }
