@@ -172,9 +172,11 @@ impl JointFrame {
     /// angular velocity in the child frame, `ω_rel = ω_c - R_jᵀ R_offᵀ ω_p`, through the pseudo-inverse
     /// of the joint's motion subspace `S` (`ω_rel = S qvel_rot`).
     pub fn free_jacobian(&self, joint: &Joint, out: &mut [f64]) {
-        let dt = joint.trans_dual.transpose() * self.delta_jacobian(joint);
-        for i in 0..joint.ntrans {
-            out[12 * i..12 * i + 12].copy_from_slice(dt.row(i).transpose().as_slice());
+        if joint.ntrans > 0 {
+            let dt = joint.trans_dual.transpose() * self.delta_jacobian(joint);
+            for i in 0..joint.ntrans {
+                out[12 * i..12 * i + 12].copy_from_slice(dt.row(i).transpose().as_slice());
+            }
         }
         let to_child = self.rot_j.transpose() * self.rot_off.transpose();
         let mut r = joint.ntrans;
@@ -194,9 +196,12 @@ impl JointFrame {
             }
         } else {
             // non-orthogonal hinge axes: θ̇ = S⁺ ω_rel (left inverse, not Sᵀ)
-            let s: Vec<Vector3<f64>> = cols.iter().flatten().copied().collect();
+            let mut s = [Vector3::zeros(); 3];
+            for (k, c) in cols.iter().flatten().enumerate() {
+                s[k] = *c;
+            }
             let mut rows = [Vector3::zeros(); 3];
-            hinges::left_inverse_rows(&s, &mut rows[..n]);
+            hinges::left_inverse_rows(&s[..n], &mut rows[..n]);
             for row in &rows[..n] {
                 put(*row);
             }

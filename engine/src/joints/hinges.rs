@@ -181,14 +181,35 @@ fn newton(axes: &[Vector3<f64>; 3], qj: &Quat, mut theta: [f64; 3]) -> ([f64; 3]
 /// Rows of the left inverse `(SᵀS)⁻¹Sᵀ` of the columns `s` (1-3 of them), written to `out`.
 /// Falls back to `Sᵀ` where `SᵀS` is singular (a gimbal lock), so it never fails.
 pub fn left_inverse_rows(s: &[Vector3<f64>], out: &mut [Vector3<f64>]) {
-    let n = s.len();
-    let mut gram = nalgebra::DMatrix::<f64>::zeros(n, n);
-    for i in 0..n {
-        for k in 0..n {
-            gram[(i, k)] = s[i].dot(&s[k]);
+    // (fixed sizes for the two- and three-hinge joints: no allocation in a residual evaluation;
+    // nalgebra inverts 2×2 and 3×3 matrices in closed form at either size, so the bits agree)
+    match s.len() {
+        2 => left_inverse_sized::<2>(s, out),
+        3 => left_inverse_sized::<3>(s, out),
+        n => {
+            let gram = nalgebra::DMatrix::<f64>::from_fn(n, n, |i, k| s[i].dot(&s[k]));
+            rows_from_inverse(s, gram.try_inverse(), out);
         }
     }
-    match gram.try_inverse() {
+}
+
+fn left_inverse_sized<const N: usize>(s: &[Vector3<f64>], out: &mut [Vector3<f64>]) {
+    let gram = nalgebra::SMatrix::<f64, N, N>::from_fn(|i, k| s[i].dot(&s[k]));
+    rows_from_inverse(s, gram.try_inverse(), out);
+}
+
+/// Rows `Σ_k inv_ik s_k` of the left inverse, or `s` itself when the Gram matrix is singular.
+fn rows_from_inverse<R, C, S>(
+    s: &[Vector3<f64>],
+    inv: Option<nalgebra::Matrix<f64, R, C, S>>,
+    out: &mut [Vector3<f64>],
+) where
+    R: nalgebra::Dim,
+    C: nalgebra::Dim,
+    S: nalgebra::RawStorage<f64, R, C>,
+{
+    let n = s.len();
+    match inv {
         Some(inv) => {
             for i in 0..n {
                 out[i] = (0..n).map(|k| s[k] * inv[(i, k)]).sum();
