@@ -206,7 +206,7 @@ fn forward_kinematics(
         );
         let rot_j = quat::rotation(&qj);
         let w_c = rot_j.transpose() * quat::rotation(&j.offset).transpose() * w_p
-            + joint_angvel(&j.rot, &qj, &qd[j.ntrans..]);
+            + joint_angvel(&j.rot, &qj, &q[j.ntrans..], &qd[j.ntrans..]);
         let ddelta = along(qd)
             + (0..j.rot.nfree().min(3))
                 .map(|i| dg_dtheta[i] * qd[j.ntrans + i])

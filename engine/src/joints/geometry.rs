@@ -47,6 +47,9 @@ pub struct JointFrame {
     delta: Vector3<f64>,
     /// `∂g/∂δφ_c` (zero without hinge offsets).
     offset_jac: Matrix3<f64>,
+    /// The angles of a three-hinge joint, found on first use (an iterative chart: the
+    /// coordinates and the motion subspace both need them).
+    angles3: std::cell::OnceCell<[f64; 3]>,
 }
 
 impl JointFrame {
@@ -76,6 +79,7 @@ impl JointFrame {
             delta_raw,
             delta: delta_raw - g,
             offset_jac,
+            angles3: std::cell::OnceCell::new(),
         }
     }
 
@@ -208,6 +212,12 @@ impl JointFrame {
         }
     }
 
+    /// [`hinges::hinges3_angles`] of this frame's relative rotation, computed once.
+    fn hinges3_angles(&self, axes: &[Vector3<f64>; 3]) -> &[f64; 3] {
+        self.angles3
+            .get_or_init(|| hinges::hinges3_angles(axes, &self.qj))
+    }
+
     /// Whether the motion subspace has orthonormal columns (then `S⁺ = Sᵀ`).
     fn orthonormal_subspace(rot: &RotDofs) -> bool {
         match rot {
@@ -225,7 +235,7 @@ impl JointFrame {
             RotDofs::Universal { a1, a2 } => [Some(self.rot_j.transpose() * a1), Some(*a2), None],
             RotDofs::Ball => [Some(Vector3::x()), Some(Vector3::y()), Some(Vector3::z())],
             RotDofs::Hinges3 { axes } => {
-                let s = hinges::hinges3_subspace(axes, &hinges::hinges3_angles(axes, &self.qj));
+                let s = hinges::hinges3_subspace(axes, self.hinges3_angles(axes));
                 [
                     Some(s.column(0).into()),
                     Some(s.column(1).into()),
@@ -260,7 +270,7 @@ impl JointFrame {
                 r[..2].copy_from_slice(&hinges::universal_angles(a1, a2, &self.rot_j));
             }
             RotDofs::Hinges3 { axes } => {
-                r[..3].copy_from_slice(&hinges::hinges3_angles(axes, &self.qj));
+                r[..3].copy_from_slice(self.hinges3_angles(axes));
             }
             RotDofs::Ball => r[..4].copy_from_slice(quat::wxyz(&self.qj).as_slice()),
         }
@@ -332,15 +342,16 @@ pub fn joint_rotation(rot: &RotDofs, q: &[f64]) -> Quat {
     }
 }
 
-/// Relative angular velocity of the child in its own frame from rotational velocity coordinates.
-pub fn joint_angvel(rot: &RotDofs, qj: &Quat, qd: &[f64]) -> Vector3<f64> {
+/// Relative angular velocity of the child in its own frame from rotational velocity coordinates,
+/// at the rotation coordinates `angles` (those `qj` was made from: a three-hinge joint's motion
+/// subspace is taken at them rather than at angles recovered from `qj`).
+pub fn joint_angvel(rot: &RotDofs, qj: &Quat, angles: &[f64], qd: &[f64]) -> Vector3<f64> {
     match rot {
         RotDofs::Locked => Vector3::zeros(),
         RotDofs::Hinge { axis, .. } => axis * qd[0],
         RotDofs::Universal { a1, a2 } => quat::rotation(qj).transpose() * a1 * qd[0] + a2 * qd[1],
         RotDofs::Hinges3 { axes } => {
-            hinges::hinges3_subspace(axes, &hinges::hinges3_angles(axes, qj))
-                * Vector3::new(qd[0], qd[1], qd[2])
+            hinges::hinges3_subspace(axes, angles) * Vector3::new(qd[0], qd[1], qd[2])
         }
         RotDofs::Ball => Vector3::new(qd[0], qd[1], qd[2]),
     }
