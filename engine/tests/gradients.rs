@@ -388,11 +388,22 @@ fn coloured_vs_reference(
     coords: Coordinates,
     kappa: Option<f64>,
 ) -> f64 {
+    coloured_vs_reference_wrt(model, state, ctrl, coords, kappa, Wrt::ALL)
+}
+
+/// [`coloured_vs_reference`] for the inputs `wrt`.
+fn coloured_vs_reference_wrt(
+    model: &Model,
+    state: &State,
+    ctrl: &[f64],
+    coords: Coordinates,
+    kappa: Option<f64>,
+    wrt: Wrt,
+) -> f64 {
     use ukemi_engine::PartialsMethod;
     let jac = |method| {
         let mut lin =
-            Linearization::with_method(model, state, ctrl, coords, Wrt::ALL, kappa, method)
-                .unwrap();
+            Linearization::with_method(model, state, ctrl, coords, wrt, kappa, method).unwrap();
         (lin.jacobians(model).unwrap(), lin.residual_evaluations())
     };
     let ((c, nc), (r, nr)) = (
@@ -428,6 +439,22 @@ fn some_ctrl(model: &Model, k: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Controls uniform in each actuator's range, from a hash of the step and the actuator.
+fn random_ctrl(model: &Model, k: usize) -> Vec<f64> {
+    model
+        .actuators
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let (lo, hi) = a.ctrlrange.unwrap_or((-1.0, 1.0));
+            let x = ((k as f64 * 12.9898 + i as f64 * 78.233).sin() * 43758.5453)
+                .fract()
+                .abs();
+            lo + (hi - lo) * x
+        })
+        .collect()
+}
+
 /// Coloured against column-by-column partials on a shared robot, a few steps into varied
 /// controls from its first keyframe (or the reference pose). Each robot brings its own inputs:
 /// the humanoid's armature and springs, the Panda's position servos (forces that depend on the
@@ -458,6 +485,20 @@ fn coloured_vs_reference_on(name: &str, kappas: &[Option<f64>]) {
     }
     for &kappa in kappas {
         coloured_vs_reference(&m, &s, &u, Coordinates::Minimal, kappa);
+    }
+    // and every step of a stretch of random controls, as Table V drives the robots (the
+    // column groups, and which joints the last residual evaluation perturbed, vary with the
+    // contacts in play)
+    // (A and B alone, Table V's inputs: without parameter columns other groups come last)
+    let ab = Wrt {
+        state: true,
+        ctrl: true,
+        params: false,
+    };
+    for k in 4..24 {
+        let u = random_ctrl(&m, k);
+        coloured_vs_reference_wrt(&m, &s, &u, Coordinates::Minimal, None, ab);
+        step(&m, &mut s, &mut ws, &u).unwrap();
     }
 }
 

@@ -38,6 +38,7 @@
 pub mod flat;
 pub mod hints;
 pub mod kept;
+mod light;
 mod partials;
 mod rollout;
 mod sparsity;

@@ -5,13 +5,15 @@
 //! **Coloured** (default): columns of `∂R/∂z` with disjoint row supports ([`super::sparsity`])
 //! are perturbed together in one residual evaluation, and each evaluation refreshes only the
 //! contact candidates the perturbation moves; the rest of the residual is recomputed from the
-//! same inputs, so it cancels in the difference. Inputs that move nothing (velocities,
-//! controls, masses, …) evaluate no contact geometry at all. `∂Y/∂z` is taken per column
-//! from the output map alone (no residual), `∂Y/∂w` per body velocity.
+//! same inputs, so it cancels in the difference. Inputs that move no pose (masses, …) evaluate
+//! no contact geometry at all. The light columns (current velocities, controls) are taken in
+//! closed form ([`super::light`]). `∂Y/∂z` is taken per column from the output map alone (no
+//! residual), `∂Y/∂w` per body velocity.
 //! **Column by column**: one full residual evaluation per column and sign, the reference the
 //! tests compare the coloured partials against.
 use nalgebra::DMatrix;
 
+use super::light::{Light, light_column};
 use super::sparsity::{Interactions, Support, colour, transmission_bodies};
 use super::tangent::{Coordinates, Point};
 use super::{FD_STEP, next_state_into};
@@ -302,20 +304,6 @@ impl<'a> Probe<'a> {
         newton::evaluate_in(model, state, &mut self.ws, w, &mut self.residual, 0.0);
     }
 
-    /// The body rows that current velocities and controls reach (see [`supports`]), at `w` with the
-    /// probe's inputs: the applied forces (actuator rates and controls), the momenta and the
-    /// armature terms. Joint frames and contact geometry are those of the unperturbed poses.
-    fn residual_light(&mut self, w: &[f64]) {
-        self.base_joints.restore(&mut self.ws);
-        // (an empty filter would mean every joint: with no joints there is nothing to filter)
-        self.ws.joint_filter.clear();
-        self.ws.joint_filter.resize(self.base.njoint(), false);
-        let (model, state) = (self.perturbed.as_ref().unwrap_or(self.base), &self.state);
-        let forces = AppliedForces::default();
-        newton::prepare_smooth_forces(model, state, &mut self.ws, &self.ctrl, &forces);
-        newton::evaluate_smooth(model, state, &mut self.ws, w, &mut self.residual);
-    }
-
     /// Output tangent (relative to `out_base`) of the next state from `w` with the probe's inputs.
     /// With `joints`, only the rows of those joints (minimal coordinates) are written.
     fn output(&mut self, w: &[f64], out_base: &Point, joints: Option<&[bool]>, y: &mut [f64]) {
@@ -482,18 +470,18 @@ pub(super) fn partials(
                 out.rows[c] = node_rows(model, &s.nodes);
             }
             out.allocate_r_z();
-            // light and full columns in separate groups: each group is evaluated one way
+            // full columns by coloured residual evaluations, light ones in closed form (their
+            // velocity columns coloured apart for the forward kinematics they share)
             let nnodes = model.topology.pattern.nnodes();
-            let mut groups = Vec::new();
-            for kind in [false, true] {
+            let coloured = |kind: bool| -> Vec<Vec<usize>> {
                 let cols: Vec<usize> = (0..nz).filter(|&c| light[c] == kind).collect();
                 let sub: Vec<Support> = cols.iter().map(|&c| sup[c].clone()).collect();
-                groups.extend(
-                    colour(&sub, nnodes)
-                        .into_iter()
-                        .map(|g| g.into_iter().map(|k| cols[k]).collect::<Vec<usize>>()),
-                );
-            }
+                colour(&sub, nnodes)
+                    .into_iter()
+                    .map(|g| g.into_iter().map(|k| cols[k]).collect())
+                    .collect()
+            };
+            let groups = coloured(false);
             // contacts and joints each group must refresh
             let refresh: Vec<Refresh> = groups
                 .iter()
@@ -516,7 +504,6 @@ pub(super) fn partials(
                     Refresh {
                         contacts: cs,
                         joints,
-                        light: light[g[0]],
                     }
                 })
                 .collect();
@@ -529,6 +516,7 @@ pub(super) fn partials(
                 &groups,
                 Some(&refresh),
             );
+            light_columns(&mut probe, &mut out, inputs, &eps, &coloured(true));
             output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, Some(&sup));
             return Ok(out);
         }
@@ -544,8 +532,6 @@ pub(super) fn partials(
 struct Refresh {
     contacts: Vec<usize>,
     joints: Vec<bool>,
-    /// Every column of the group is light (see [`supports`]): the light residual evaluates it.
-    light: bool,
 }
 
 /// `∂R/∂z` by central differences, one residual evaluation per group and sign; with
@@ -566,7 +552,6 @@ fn residual_columns(
         for sign in [1.0, -1.0] {
             probe.perturb(inputs, eps, group, sign);
             match refresh {
-                Some(r) if r[k].light => probe.residual_light(w),
                 Some(r) => probe.residual_restricted(w, &r[k].contacts, &active, &r[k].joints),
                 None => probe.residual_full(w),
             }
@@ -591,6 +576,88 @@ fn residual_columns(
         }
     }
     probe.ws.active.copy_from_slice(&active);
+}
+
+/// `∂R/∂z` of the light columns (current velocities, controls) in closed form
+/// ([`super::light`]); the twists a group of velocity columns moves come from one forward
+/// kinematics pass (the twists are linear in the velocity coordinates at fixed poses, so the
+/// one-sided difference is exact to round-off; the columns of a group touch disjoint bodies).
+fn light_columns(
+    probe: &mut Probe,
+    out: &mut Partials,
+    inputs: &[Input],
+    eps: &[f64],
+    groups: &[Vec<usize>],
+) {
+    let (model, point) = (probe.base, probe.point);
+    // the free Jacobians and coordinates of the gradient point (a residual evaluation leaves
+    // those of its perturbed joints)
+    probe.base_joints.restore(&mut probe.ws);
+    let below = subtrees(model);
+    let nb = model.nbody();
+    let (mut dt, mut dr) = (vec![[0.0; 6]; nb], vec![[0.0; 6]; nb]);
+    // the first row of each body's node, sorted, for scattering body rows onto the supports
+    let p = &model.topology.pattern;
+    let mut starts: Vec<(usize, usize)> = (1..nb)
+        .filter_map(|b| Some((p.offset(body_node(b)?), b)))
+        .collect();
+    starts.sort_unstable();
+    let body_row = |dr: &[[f64; 6]], r: usize| -> f64 {
+        let i = starts.partition_point(|&(o, _)| o <= r);
+        match i.checked_sub(1).map(|i| starts[i]) {
+            Some((o, b)) if r < o + 6 => dr[b][r - o],
+            _ => 0.0,
+        }
+    };
+    for group in groups {
+        let states: Vec<usize> = group
+            .iter()
+            .copied()
+            .filter(|&c| matches!(inputs[c], Input::State(_)))
+            .collect();
+        if !states.is_empty() {
+            probe.perturb(inputs, eps, &states, 1.0);
+        }
+        for &c in group {
+            dr.fill([0.0; 6]);
+            let input = match inputs[c] {
+                Input::State(i) => {
+                    dt.fill([0.0; 6]);
+                    for b in state_bodies(model, point.coords, &below, i).0 {
+                        let ((v1, w1), (v0, w0)) =
+                            (probe.state.velocity(b), point.state.velocity(b));
+                        let d = [v1 - v0, w1 - w0];
+                        for k in 0..6 {
+                            dt[b][k] = d[k / 3][k % 3] / FD_STEP;
+                        }
+                    }
+                    Light::Twists(&dt)
+                }
+                Input::Ctrl(a) => Light::Ctrl(a),
+                Input::Param(_) => unreachable!("parameter columns are never light"),
+            };
+            light_column(
+                model,
+                &point.state,
+                &probe.ws,
+                probe.ctrl0,
+                input,
+                eps[c],
+                &mut dr,
+            );
+            // scatter the body rows onto the column's support
+            let mut k = out.r_start[c];
+            for &(s, l) in &out.rows[c] {
+                for r in s..s + l {
+                    out.r_z[k] = body_row(&dr, r);
+                    k += 1;
+                }
+            }
+        }
+        if !states.is_empty() {
+            probe.restore(inputs, &states);
+        }
+    }
 }
 
 /// `∂Y/∂z` (the output map alone: only state columns and the time step enter it) and `∂Y/∂w`

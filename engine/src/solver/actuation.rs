@@ -8,60 +8,82 @@
 use nalgebra::Vector3;
 
 use crate::math::quat;
-use crate::model::{Model, Transmission};
+use crate::model::{Actuator, Model, Transmission};
 use crate::state::{State, Workspace};
 
-/// Coordinate `dof` of joint `ji` and its rate (through the current free Jacobian); both from
-/// `prepare_smooth_forces`'s pass over the joints (`ws.joint_q`, `ws.free_jac`).
-fn coordinate_and_rate(
+/// Rate of free dof `dof` of joint `ji` through the current free Jacobian (`ws.free_jac`, from
+/// `prepare_smooth_forces`) at the body twists `twist(b)` (linear velocity, angular velocity as
+/// [`State::velocity`] holds them).
+pub(crate) fn dof_rate(
     model: &Model,
-    state: &State,
     ws: &Workspace,
     ji: usize,
     dof: usize,
-) -> (f64, f64) {
+    twist: &dyn Fn(usize) -> (Vector3<f64>, Vector3<f64>),
+) -> f64 {
     let joint = &model.joints[ji];
     let row = &ws.free_jac[ws.free_adr[ji] + 12 * dof..ws.free_adr[ji] + 12 * dof + 12];
     let mut rate = 0.0;
     for (side, b) in [(0, joint.parent), (1, joint.child)] {
         if b > 0 {
-            let (v, w) = state.velocity(b);
+            let (v, w) = twist(b);
             for i in 0..3 {
                 rate += row[6 * side + i] * v[i] + row[6 * side + 3 + i] * w[i];
             }
         }
     }
-    (ws.joint_q[ji][dof], rate)
+    rate
+}
+
+/// Transmission length `Σ coef q` and rate `Σ coef q̇` of actuator `a` (0 for a site), the
+/// rates at the body twists `twist(b)`; the coordinates from `ws.joint_q`.
+pub(crate) fn length_and_rate(
+    model: &Model,
+    ws: &Workspace,
+    a: usize,
+    twist: &dyn Fn(usize) -> (Vector3<f64>, Vector3<f64>),
+) -> (f64, f64) {
+    let (mut length, mut rate) = (0.0, 0.0);
+    let mut add = |ji: usize, dof: usize, coef: f64| {
+        length += coef * ws.joint_q[ji][dof];
+        rate += coef * dof_rate(model, ws, ji, dof, twist);
+    };
+    match &model.actuators[a].transmission {
+        Transmission::Joint { joint, dof } => add(*joint, *dof, 1.0),
+        Transmission::Tendon(terms) => terms.iter().for_each(|t| add(t.0, t.1, t.2)),
+        // no `refsite`: MuJoCo's site length is 0 (the loader rejects servo biases there)
+        Transmission::Site { .. } => {}
+    }
+    (length, rate)
+}
+
+/// The scalar force of actuator `act` at control `ctrl` and transmission length and rate.
+pub(crate) fn actuator_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> f64 {
+    let u = match act.ctrlrange {
+        Some((lo, hi)) => ctrl.clamp(lo, hi),
+        None => ctrl,
+    };
+    let mut force = act.gain * u + act.bias[0];
+    if act.has_bias() {
+        force += act.bias[1] * act.gear * length + act.bias[2] * act.gear * rate;
+    }
+    match act.forcerange {
+        Some((lo, hi)) => force.clamp(lo, hi),
+        None => force,
+    }
 }
 
 /// Scalar force of every actuator into `ws.act_force` (needs `ws.free_jac` and `ws.joint_q` at
 /// the current state).
 pub(crate) fn actuator_forces(model: &Model, state: &State, ws: &mut Workspace, ctrl: &[f64]) {
+    let twist = |b: usize| state.velocity(b);
     for (a, act) in model.actuators.iter().enumerate() {
-        let u = match act.ctrlrange {
-            Some((lo, hi)) => ctrl[a].clamp(lo, hi),
-            None => ctrl[a],
+        let (length, rate) = if act.has_bias() {
+            length_and_rate(model, ws, a, &twist)
+        } else {
+            (0.0, 0.0)
         };
-        let mut force = act.gain * u + act.bias[0];
-        if act.has_bias() {
-            let (mut length, mut rate) = (0.0, 0.0);
-            let mut add = |ji: usize, dof: usize, coef: f64| {
-                let (q, qd) = coordinate_and_rate(model, state, ws, ji, dof);
-                length += coef * q;
-                rate += coef * qd;
-            };
-            match &act.transmission {
-                Transmission::Joint { joint, dof } => add(*joint, *dof, 1.0),
-                Transmission::Tendon(terms) => terms.iter().for_each(|t| add(t.0, t.1, t.2)),
-                // no `refsite`: MuJoCo's site length is 0 (the loader rejects servo biases there)
-                Transmission::Site { .. } => {}
-            }
-            force += act.bias[1] * act.gear * length + act.bias[2] * act.gear * rate;
-        }
-        if let Some((lo, hi)) = act.forcerange {
-            force = force.clamp(lo, hi);
-        }
-        ws.act_force[a] = force;
+        ws.act_force[a] = actuator_force(act, ctrl[a], length, rate);
     }
 }
 

@@ -440,45 +440,6 @@ pub(crate) fn evaluate_in(
     }
 }
 
-/// The body rows that the current velocities and the controls move: momentum minus the applied
-/// impulses (actuator rates and controls), plus the armature terms. The gradients' light
-/// partials difference two of these at the same `w` and poses; what depends on those alone (the
-/// joint impulses and constraint rows, dampers, couplings, contact and limit rows) would cancel
-/// in the difference and is left out, as are the joint rows.
-pub(crate) fn evaluate_smooth(
-    model: &Model,
-    state: &State,
-    ws: &mut Workspace,
-    w: &[f64],
-    residual: &mut [f64],
-) {
-    ws.kept.valid = false;
-    let h = model.options.timestep;
-    let h_prev = state.interval(h);
-    for (b, body) in model.bodies.iter().enumerate().skip(1) {
-        let (v, om) = w_body(model, w, b);
-        let prev = state.velocity(b);
-        let (lin, rot) = momentum_residual(
-            body.mass,
-            &body.inertia,
-            (h_prev, h),
-            (&prev.0, &prev.1),
-            (&v, &om),
-        );
-        let (o, applied) = (body_slot(model, b), &ws.applied[b]);
-        for i in 0..3 {
-            residual[o + i] = lin[i] - applied[i];
-            residual[o + 3 + i] = rot[i] - applied[3 + i];
-        }
-    }
-    for (ji, joint) in model.joints.iter().enumerate() {
-        if joint.has_armature() {
-            let jf = &ws.free_jac[ws.free_adr[ji]..];
-            super::armature::add_armature_residual(model, state, joint, jf, w, residual);
-        }
-    }
-}
-
 /// Whether joint `ji` passes the workspace's joint filter (see `Workspace::joint_filter`).
 pub(crate) fn joint_included(ws: &Workspace, ji: usize) -> bool {
     ws.joint_filter.is_empty() || ws.joint_filter[ji]
