@@ -369,7 +369,7 @@ fn steps(model: &Model, inputs: &[Input]) -> Vec<f64> {
 }
 
 /// Row supports of every input column, and whether the column is light: it changes current
-/// velocities or controls only, so its rows are body rows and the light residual evaluates it.
+/// velocities or controls only, so its rows are body rows, taken in closed form ([`super::light`]).
 fn supports(model: &Model, probe: &Probe, inputs: &[Input]) -> (Vec<Support>, Vec<bool>) {
     let graph = Interactions::new(model, &probe.ws.active);
     let all: Vec<usize> = (1..model.nbody()).collect();

@@ -166,8 +166,8 @@ impl Support {
     /// The support of an input that changes only the current velocities or the applied forces
     /// of the bodies `touched` (a velocity, a control): the body rows of those bodies and their
     /// neighbours (momenta, actuator rates, armature). Joint, limit and contact rows read poses
-    /// and `w` only, so they are not in it; such a column is evaluated by the partials' light
-    /// residual, which writes body rows alone.
+    /// and `w` only, so they are not in it; such a column is taken in closed form on body rows
+    /// alone (`gradients::light`).
     pub fn body_rows(graph: &Interactions, touched: &[usize]) -> Support {
         let mut nodes: Vec<usize> = touched
             .iter()
