@@ -767,18 +767,37 @@ fn output_partials(
     for group in &groups {
         let js = restrict
             .then(|| joints_of(&mut group.iter().flat_map(|&b| rows[b].nodes.iter().copied())));
+        // a joint without free translations has coordinates and rates of its bodies'
+        // orientations and angular velocities alone: the linear velocity components move only
+        // the rows of the joints with translations (the others' entries are exactly zero)
+        let translating = js.as_ref().map(|js| {
+            let t: Vec<bool> = (0..model.njoint())
+                .map(|ji| js[ji] && model.joints[ji].ntrans > 0)
+                .collect();
+            t
+        });
         for comp in 0..6 {
+            let (js, only) = match &translating {
+                Some(t) if comp < 3 => (Some(t), true),
+                _ => (js.as_ref(), false),
+            };
+            if only && !js.is_some_and(|t| t.contains(&true)) {
+                continue;
+            }
             for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
                 for &b in group {
                     wp[slot(b) + comp] = w[slot(b) + comp] + sign * FD_STEP;
                 }
-                probe.output(&wp, out_base, js.as_deref(), y);
+                probe.output(&wp, out_base, js.map(Vec::as_slice), y);
             }
             for &b in group {
                 let k = slot(b) + comp;
                 wp[k] = w[k];
                 // `w_cols` lists the moving bodies' six velocity rows in body order
                 for &i in &rows[b].nodes {
+                    if only && !js.is_some_and(|t| t[dof_joint[i % model.nv.max(1)]]) {
+                        continue;
+                    }
                     out.y_w[(i, 6 * b + comp)] = (yp[i] - ym[i]) / (2.0 * FD_STEP);
                 }
             }
