@@ -119,7 +119,8 @@ pub(crate) fn prepare_smooth_forces(
         frame.free_jacobian(joint, &mut ws.free_jac[fa..fa + 12 * nf]);
         frame.coordinates(joint, &mut ws.joint_q[ji][..joint.nq()]);
         let mut tau = [0.0; 6];
-        generalized_force(model, ji, &frame, forces, &mut tau[..nf]);
+        let q = &ws.joint_q[ji][..joint.nq()];
+        generalized_force(model, ji, &frame, q, forces, &mut tau[..nf]);
         ws.joint_tau[ji] = tau;
     }
     super::actuation::actuator_forces(model, state, ws, ctrl);
@@ -198,19 +199,18 @@ fn restart_cold(model: &Model, state: &State, ws: &mut Workspace) {
     super::inequality::initialize(model, state, ws, false);
 }
 
-/// Spring + applied generalized force on the free dofs of joint `ji`.
+/// Spring + applied generalized force on the free dofs of joint `ji` at its coordinates `coords`.
 fn generalized_force(
     model: &Model,
     ji: usize,
     frame: &JointFrame,
+    coords: &[f64],
     forces: &AppliedForces,
     tau: &mut [f64],
 ) {
     let joint = &model.joints[ji];
     if joint.has_spring() {
-        let mut coords = [0.0; 7];
-        frame.coordinates(joint, &mut coords[..joint.nq()]);
-        frame.spring_force(joint, &coords[..joint.nq()], tau);
+        frame.spring_force(joint, coords, tau);
     }
     if let (Some(q), false) = (forces.qfrc, joint.is_loop) {
         for (i, t) in tau.iter_mut().enumerate() {
