@@ -183,7 +183,7 @@ struct Probe<'a> {
 impl<'a> Probe<'a> {
     fn new(model: &'a Model, point: &'a Point, ctrl: &'a [f64], held: Held) -> Probe<'a> {
         let (active, held_frozen) = held;
-        let mut ws = Recycled::new(Workspace::pooled(model));
+        let mut ws = Recycled::new(Workspace::pooled_scratch(model));
         // the residual map is linearised with the solve's contact activation frozen
         ws.active.copy_from_slice(active);
         let mut frozen = vec![None; model.contacts.len()];
