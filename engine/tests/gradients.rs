@@ -426,33 +426,31 @@ fn coloured_vs_reference_wrt(
     worst
 }
 
-/// Deterministic controls in each actuator's range.
-fn some_ctrl(model: &Model, k: usize) -> Vec<f64> {
+/// Controls at the fraction `at(i)` of each actuator `i`'s range (`[-1, 1]` when unlimited).
+fn ctrl_in_range(model: &Model, at: impl Fn(usize) -> f64) -> Vec<f64> {
     model
         .actuators
         .iter()
         .enumerate()
         .map(|(i, a)| {
             let (lo, hi) = a.ctrlrange.unwrap_or((-1.0, 1.0));
-            lo + (hi - lo) * (0.5 + 0.4 * ((i * 7 + k * 3) as f64).sin())
+            lo + (hi - lo) * at(i)
         })
         .collect()
 }
 
+/// Deterministic controls in each actuator's range.
+fn some_ctrl(model: &Model, k: usize) -> Vec<f64> {
+    ctrl_in_range(model, |i| 0.5 + 0.4 * ((i * 7 + k * 3) as f64).sin())
+}
+
 /// Controls uniform in each actuator's range, from a hash of the step and the actuator.
 fn random_ctrl(model: &Model, k: usize) -> Vec<f64> {
-    model
-        .actuators
-        .iter()
-        .enumerate()
-        .map(|(i, a)| {
-            let (lo, hi) = a.ctrlrange.unwrap_or((-1.0, 1.0));
-            let x = ((k as f64 * 12.9898 + i as f64 * 78.233).sin() * 43758.5453)
-                .fract()
-                .abs();
-            lo + (hi - lo) * x
-        })
-        .collect()
+    ctrl_in_range(model, |i| {
+        ((k as f64 * 12.9898 + i as f64 * 78.233).sin() * 43758.5453)
+            .fract()
+            .abs()
+    })
 }
 
 /// Coloured against column-by-column partials on a shared robot, a few steps into varied
