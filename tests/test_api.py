@@ -121,7 +121,7 @@ def test_with_options_returns_new_model(pend):
 
 def test_iteration_counts_reject_negative_values_by_name(pend):
     # a negative count is a named ValueError (not pyo3's OverflowError); the model is unchanged
-    for name in ("max_iter", "endgame_iter", "max_ls", "max_subdivisions"):
+    for name in ("max_iter", "endgame_iter", "acceptable_iter", "max_ls", "max_subdivisions"):
         with pytest.raises(ValueError, match=name):
             pend.with_options(**{name: -1})
         assert pend.options[name] > 0

@@ -466,6 +466,7 @@ impl PyModel {
             ("acceptable_kappa_tol", o.acceptable_kappa_tol),
             ("max_iter", o.max_iter as f64),
             ("endgame_iter", o.endgame_iter as f64),
+            ("acceptable_iter", o.acceptable_iter as f64),
             ("max_ls", o.max_ls as f64),
             ("undercut", o.undercut),
             ("regularization", o.regularization),
@@ -510,7 +511,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -522,6 +523,7 @@ impl PyModel {
         acceptable_kappa_tol: Option<f64>,
         max_iter: Option<i64>,
         endgame_iter: Option<i64>,
+        acceptable_iter: Option<i64>,
         max_ls: Option<i64>,
         undercut: Option<f64>,
         warm_start: Option<bool>,
@@ -553,6 +555,7 @@ impl PyModel {
             o.rtol = rtol.unwrap_or(o.rtol);
             o.max_iter = count("max_iter", max_iter, o.max_iter)?;
             o.endgame_iter = count("endgame_iter", endgame_iter, o.endgame_iter)?;
+            o.acceptable_iter = count("acceptable_iter", acceptable_iter, o.acceptable_iter)?;
             o.max_ls = count("max_ls", max_ls, o.max_ls)?;
             o.regularization = regularization.unwrap_or(o.regularization);
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);

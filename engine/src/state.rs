@@ -458,6 +458,9 @@ pub struct Workspace {
     /// Whether the trace also estimates condition numbers (dense, slow).
     pub(crate) trace_condition: bool,
     pub(crate) attempt: u8,
+    /// Whether the last interior-point attempt ended stalled near convergence
+    /// (`Options::acceptable_iter`): its acceptable iterate ends the solve without retries.
+    pub(crate) stalled_near: bool,
 }
 
 /// Most spare workspaces kept per thread ([`Workspace::pooled`]): a linearisation holds two
@@ -726,6 +729,7 @@ impl Workspace {
             trace: None,
             trace_condition: false,
             attempt: 0,
+            stalled_near: false,
         }
     }
 }

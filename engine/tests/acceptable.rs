@@ -72,3 +72,45 @@ fn unreachable_tolerance_ends_acceptable_within_the_acceptable_bounds() {
     let failed = reports.iter().filter(|r| !r.0.is_success()).count();
     assert!(failed > 0, "no step failed with acceptance off");
 }
+
+/// Per step of 100: status, iterations, and the last attempt the trace recorded.
+fn traced(model: &Model) -> (Vec<(SolveStatus, usize, u8)>, State) {
+    let mut state = State::reference(model);
+    let mut ws = Workspace::new(model);
+    ws.set_trace(true, false);
+    let steps = (0..100)
+        .map(|_| {
+            let r = step(model, &mut state, &mut ws, &[]).unwrap();
+            let last = ws.trace().iter().map(|t| t.attempt).max().unwrap_or(0);
+            (r.status, r.iterations, last)
+        })
+        .collect();
+    (steps, state)
+}
+
+#[test]
+fn acceptable_iter_keeps_the_trajectory_and_only_saves_iterations() {
+    // an rtol below the momentum rows' round-off (m g h ≈ 0.1 N·s): the contact steps end
+    // acceptable. With `acceptable_iter` (default 15) a stall near convergence ends the solve
+    // early; with 0 every acceptable attempt is retried for full convergence. Both are the
+    // same trajectory to the acceptable tolerance, and the early stop never costs iterations.
+    let base = box_model();
+    let mut o = base.options.clone();
+    assert_eq!(o.acceptable_iter, 15);
+    o.rtol = 1e-18;
+    let (early, end) = traced(&base.with_options(o.clone()).unwrap());
+    o.acceptable_iter = 0;
+    let (retried, end_retried) = traced(&base.with_options(o).unwrap());
+    assert!(early.iter().chain(&retried).all(|s| s.0.is_success()));
+    assert!(
+        retried
+            .iter()
+            .any(|s| s.0 == SolveStatus::Acceptable && s.2 > 0)
+    );
+    let total = |v: &[(SolveStatus, usize, u8)]| v.iter().map(|s| s.1).sum::<usize>();
+    let (fast, slow) = (total(&early), total(&retried));
+    eprintln!("iterations in 100 steps: acceptable_iter 15 {fast}, 0 {slow}");
+    assert!(fast <= slow, "{fast} vs {slow} iterations");
+    let dz = (end.pose(1).pos - end_retried.pose(1).pos).norm();
+    assert!(dz < 1e-8, "trajectories differ by {dz:e} m");
+}

@@ -34,6 +34,19 @@ pub struct Options {
     pub acceptable_rtol: f64,
     /// Acceptable complementarity violation (see `acceptable_rtol`). Default 1e-8.
     pub acceptable_kappa_tol: f64,
+    /// An attempt whose iterate stays acceptable (within `acceptable_rtol` and
+    /// `acceptable_kappa_tol`) and within 100× of `rtol` and `kappa_tol` for this many
+    /// consecutive iterations, over which its worst violation relative to `rtol` and
+    /// `kappa_tol` did not halve, has stalled there: it ends as `Acceptable`, and so does the
+    /// solve (the cold retries are for failures). IPOPT's `acceptable_iter`, with its default
+    /// 15, plus the nearness and progress tests. 0 turns this off (an acceptable iterate then
+    /// ends an attempt only when it stalls or reaches its budget, and the retries try for full
+    /// convergence first, as every other acceptable attempt still does). Why: a finger pad
+    /// sliding on the other pad holds the Jordan product's vector part of its friction cone
+    /// near 3e-11 (the iterate's residual 1e-12, its mean complementarity 8e-13) and crawled
+    /// towards `kappa_tol` for the whole 200-iteration budget, then through two cold retries
+    /// that ended the same way (Panda, `step_bench` seed 12, step 261: 450 iterations).
+    pub acceptable_iter: usize,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
     /// Start contact and limit variables from the previous step's solution (pushed
@@ -128,6 +141,7 @@ impl Default for Options {
             kappa_tol: 1e-11,
             acceptable_rtol: 1e-8,
             acceptable_kappa_tol: 1e-8,
+            acceptable_iter: 15,
             undercut: 10.0,
             warm_start: true,
             warm_start_margin: 1e-6,

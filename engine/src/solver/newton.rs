@@ -848,7 +848,9 @@ fn solve_active(
     let mut acceptable: Option<StepReport> = None;
     let mut iterations = report.iterations;
     for &scaled in retries {
-        if report.status == SolveStatus::Converged {
+        // (an attempt stalled near convergence ends the solve: `Options::acceptable_iter`)
+        let stalled_near = report.status == SolveStatus::Acceptable && ws.stalled_near;
+        if report.status == SolveStatus::Converged || stalled_near {
             break;
         }
         if report.status == SolveStatus::Acceptable && acceptable.is_none() {
