@@ -3,6 +3,9 @@
 //! its residual honestly, and is a failure when acceptance is turned off.
 #[path = "common/contact.rs"]
 mod common;
+#[allow(dead_code)]
+#[path = "../examples/common/workload.rs"]
+mod workload;
 use common::*;
 use ukemi_engine::{ContactModel, Model, ModelBuilder, Shape, SolveStatus, State, Workspace, step};
 
@@ -113,4 +116,55 @@ fn acceptable_iter_keeps_the_trajectory_and_only_saves_iterations() {
     assert!(fast <= slow, "{fast} vs {slow} iterations");
     let dz = (end.pose(1).pos - end_retried.pose(1).pos).norm();
     assert!(dz < 1e-8, "trajectories differ by {dz:e} m");
+}
+
+#[test]
+fn the_pandas_finger_pad_stalls_end_early_on_the_same_states() {
+    // the shared Panda, Table V workload (`step_bench panda.xml 300 1 12`): its finger pads
+    // pressed together stall a few kappa_tol above kappa_tol (step 261: 450 iterations).
+    // Every step of the run without the early stop is also solved from the same state with it
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models/panda.xml");
+    if !path.exists() {
+        eprintln!("skipped: {} not found", path.display());
+        return;
+    }
+    let early = workload::load(path.to_str().unwrap());
+    let mut o = early.options.clone();
+    o.acceptable_iter = 0;
+    let full = early.with_options(o.clone()).unwrap();
+    let mut state = workload::start_state(&early);
+    let mut ws = [Workspace::new(&early), Workspace::new(&full)];
+    let mut controls = workload::Controls::with_seed(12);
+    let (mut its_early, mut its_full, mut stopped, mut worst) = (0, 0, 0, 0.0f64);
+    for k in 0..265 {
+        let ctrl = controls.next(&early);
+        let mut next = state.clone();
+        let a = step(&early, &mut next, &mut ws[0], &ctrl).unwrap();
+        let b = step(&full, &mut state, &mut ws[1], &ctrl).unwrap();
+        assert!(
+            a.status.is_success() && b.status.is_success(),
+            "step {k}: {a:?} {b:?}"
+        );
+        (its_early, its_full) = (its_early + a.iterations, its_full + b.iterations);
+        if a.iterations < b.iterations {
+            stopped += 1;
+            // ended by the early stop: acceptable, within 100 kappa_tol
+            assert_eq!(a.status, SolveStatus::Acceptable, "step {k}");
+            assert!(a.complementarity < 100.0 * o.kappa_tol, "step {k}: {a:?}");
+            assert!(a.residual < 100.0 * o.rtol, "step {k}: {a:?}");
+        }
+        for body in 1..early.nbody() {
+            worst = worst.max((next.pose(body).pos - state.pose(body).pos).amax());
+        }
+    }
+    eprintln!(
+        "{stopped} steps stopped early: {its_early} iterations instead of {its_full}; positions within {worst:.1e} m"
+    );
+    assert!(
+        stopped > 0 && its_full - its_early > 250,
+        "{its_early} vs {its_full}"
+    );
+    // the stalled grasp's positions are determined to a few micrometres at these residuals
+    assert!(worst < 1e-5, "positions differ by {worst:e} m");
 }
