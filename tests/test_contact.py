@@ -150,6 +150,39 @@ def test_nesterov_todd_scaling_reaches_the_same_step():
     np.testing.assert_allclose(a.contact_impulse, b.contact_impulse, atol=1e-9)
 
 
+def _sliding_box(cone_gap, steps=40):
+    """A 1 kg box sliding diagonally on the floor (μ = 0.5) from 2 m/s: its velocities."""
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("floor", "world", "plane", friction=0.5)
+    b.add_body("box", mass=1.0, inertia=(0.0067, 0.0067, 0.0067), pos=(0, 0, 0.1))
+    b.add_joint("free", "floating", "world", "box")
+    b.add_geom("box", "box", "box", size=(0.1, 0.1, 0.1), friction=0.5)
+    m = b.compile().with_options(cone_gap=cone_gap)
+    v0 = 2.0 * np.array([np.cos(0.5), np.sin(0.5)])
+    s = m.make_state(qpos=[0, 0, 0.1, 1, 0, 0, 0], qvel=[v0[0], v0[1], 0, 0, 0, 0])
+    vs = []
+    for _ in range(steps):
+        s, info = ukemi.step(m, s)
+        assert info.converged
+        vs.append(np.array(s.qvel[:2]))
+    return np.array(vs)
+
+
+def test_friction_cones_judged_by_duality_gap_or_jordan_product_slide_alike():
+    # cone_gap (default) ends a solve on each friction cone's duality gap bᵀc; False also asks
+    # the Jordan product's vector part (the friction direction) to reach kappa_tol. The slide is
+    # Coulomb's either way: deceleration μ g along the initial direction, no lateral drift
+    gap, jordan = _sliding_box(True), _sliding_box(False)
+    np.testing.assert_allclose(gap, jordan, atol=1e-8)
+    direction = np.array([np.cos(0.5), np.sin(0.5)])
+    for vs in (gap, jordan):
+        speed = vs @ direction
+        lateral = vs @ np.array([-direction[1], direction[0]])
+        assert np.abs(lateral).max() < 1e-8
+        # 2 m/s falls by μ g h = 0.049 m/s a step (until the box stops after ~41 steps)
+        np.testing.assert_allclose(np.diff(speed), -0.5 * 9.81 * 0.01, rtol=1e-6)
+
+
 def test_solver_trace_without_condition_numbers():
     m = ball_on_floor(z=0.1)
     _, info, trace = ukemi.solver_trace(m, m.make_state())

@@ -511,7 +511,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, cone_gap=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -524,6 +524,7 @@ impl PyModel {
         max_iter: Option<i64>,
         endgame_iter: Option<i64>,
         acceptable_iter: Option<i64>,
+        cone_gap: Option<bool>,
         max_ls: Option<i64>,
         undercut: Option<f64>,
         warm_start: Option<bool>,
@@ -556,6 +557,7 @@ impl PyModel {
             o.max_iter = count("max_iter", max_iter, o.max_iter)?;
             o.endgame_iter = count("endgame_iter", endgame_iter, o.endgame_iter)?;
             o.acceptable_iter = count("acceptable_iter", acceptable_iter, o.acceptable_iter)?;
+            o.cone_gap = cone_gap.unwrap_or(o.cone_gap);
             o.max_ls = count("max_ls", max_ls, o.max_ls)?;
             o.regularization = regularization.unwrap_or(o.regularization);
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);

@@ -22,6 +22,7 @@ fn with(model: &Model, option: &str, value: f64) -> Model {
         "max_iter" => o.max_iter = value as usize,
         "kappa_tol" => o.kappa_tol = value,
         "rtol" => o.rtol = value,
+        "cone_gap" => o.cone_gap = value != 0.0,
         _ => panic!("unknown option {option}"),
     }
     model.with_options(o).unwrap()

@@ -41,12 +41,28 @@ pub struct Options {
     /// solve (the cold retries are for failures). IPOPT's `acceptable_iter`, with its default
     /// 15, plus the nearness and progress tests. 0 turns this off (an acceptable iterate then
     /// ends an attempt only when it stalls or reaches its budget, and the retries try for full
-    /// convergence first, as every other acceptable attempt still does). Why: a finger pad
-    /// sliding on the other pad holds the Jordan product's vector part of its friction cone
+    /// convergence first, as every other acceptable attempt still does). Why: with `cone_gap`
+    /// off, a finger pad sliding on the other pad holds the Jordan product's vector part of its friction cone
     /// near 3e-11 (the iterate's residual 1e-12, its mean complementarity 8e-13) and crawled
     /// towards `kappa_tol` for the whole 200-iteration budget, then through two cold retries
-    /// that ended the same way (Panda, `step_bench` seed 12, step 261: 450 iterations).
+    /// that ended the same way (Panda, `step_bench` seed 12, step 261: 450 iterations). With
+    /// `cone_gap` on, the same states (`option_ab MODEL.xml 300 SEED acceptable_iter 0 15`):
+    /// Panda seed 10 2452 → 1798 iterations (1.58 → 0.50 s), seed 12 2431 → 2226, X2 seed 8
+    /// 1294 → 908; the humanoid and the A1 unchanged.
     pub acceptable_iter: usize,
+    /// Judge a friction cone's complementarity by its duality gap `bᵀc` alone (the scalar part
+    /// of the Jordan product `b ∘ c`), as conic interior-point solvers do (ECOS, Clarabel), not
+    /// also by the vector part `b₀c̄ + c₀b̄`. Default true. Why: for a sliding pair (impulse and
+    /// slip both on their cone's boundary) the vector part measures how far the friction
+    /// direction is from opposing the slip, and it shrinks only like the square root of the
+    /// gap; `kappa_tol` on it demanded the direction to ~1e-11 rad, and the Panda's pressed
+    /// finger pads crawled towards it for hundreds of iterations. Measured on the same states
+    /// (`option_ab MODEL.xml 300 SEED cone_gap 0 1`, seeds 5..12): Panda seed 10 2766 → 1833
+    /// iterations (its step 250 converged in 16 instead of failing for 800 and being
+    /// subdivided), seed 9 1745 → 1562, X2 seed 8 1088 → 904, A1 seed 8 4939 → 4724, the
+    /// humanoid 0.3-2.4% fewer; Panda seed 11 3581 → 3756. A sliding box's friction opposes
+    /// its slip to 1e-8 either way (`tests/test_contact.py`).
+    pub cone_gap: bool,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
     /// Start contact and limit variables from the previous step's solution (pushed
@@ -142,6 +158,7 @@ impl Default for Options {
             acceptable_rtol: 1e-8,
             acceptable_kappa_tol: 1e-8,
             acceptable_iter: 15,
+            cone_gap: true,
             undercut: 10.0,
             warm_start: true,
             warm_start_margin: 1e-6,

@@ -932,8 +932,9 @@ fn violations(
     // exceeds 1 N·s: a 1000 kg box's contact carries a product γ s 25× larger than a 1 kg box's
     // for the same hovering distance s, and round-off limits s, not γ s
     let mut kvio: f64 = 0.0;
+    let cone_gap = model.options.cone_gap;
     let mut is_comp = |o: usize, p: usize, row: usize, soc: bool, residual: &mut [f64]| {
-        let n = if soc { 3 } else { 1 };
+        let n = if soc && !cone_gap { 3 } else { 1 };
         let scale = w[o + p].abs().max(1.0);
         for i in 0..n {
             let v = residual[o + row + i] / scale;
