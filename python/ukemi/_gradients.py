@@ -73,7 +73,7 @@ class StepJacobians:
     A: np.ndarray  #: (ny, ny) d(next state)/d(state); ny = 2·nv (minimal) or 12·(nbody−1)
     B: np.ndarray  #: (ny, nu) d(next state)/d(ctrl)
     C: np.ndarray  #: (ny, nparams) d(next state)/d(model.params)
-    next_state: object  #: the (hard) next state
+    next_state: object  #: the (hard) next state; in minimal coordinates, of the state rebuilt from (qpos, qvel)
     info: object  #: StepInfo of the step
     central_info: object  #: StepInfo of the move to the central path (None if not smoothed)
     coordinates: str
