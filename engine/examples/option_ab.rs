@@ -5,7 +5,7 @@
 //! OPTION A B` (SEED `default`: `step_bench`'s controls without a seed), OPTION one of
 //! `acceptable_iter`, `endgame_iter`, `max_iter`, `kappa_tol`, `rtol`. Prints, for A and B, the total iterations and seconds, the slowest step, failed
 //! steps, and the largest difference of the next states' positions (m); with `AB_VERBOSE=1`
-//! every step whose positions differ by more than 1e-7 m.
+//! every step whose positions differ by more than 1e-7 m, with the energies before and after.
 #![allow(clippy::print_stdout)]
 use std::time::Instant;
 
@@ -64,9 +64,14 @@ fn main() {
             d = d.max((next[0].pose(b).pos - next[1].pose(b).pos).amax());
         }
         if d > 1e-7 && std::env::var("AB_VERBOSE").is_ok() {
+            let e = |s: &ukemi_engine::State| ukemi_engine::mechanics::total_energy(&base, s);
             println!(
-                "step {i}: positions differ by {d:.2e} m; B {:?}; A {:?}",
-                reports[0], reports[1]
+                "step {i}: positions differ by {d:.2e} m; B {:?}; A {:?}; energy {:.6} J -> A {:.6} J, B {:.6} J",
+                reports[0],
+                reports[1],
+                e(&state),
+                e(&next[0]),
+                e(&next[1])
             );
         }
         diff = diff.max(d);
