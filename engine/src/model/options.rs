@@ -42,10 +42,10 @@ pub struct Options {
     /// 15, plus the nearness and progress tests. 0 turns this off (an acceptable iterate then
     /// ends an attempt only when it stalls or reaches its budget, and the retries try for full
     /// convergence first, as every other acceptable attempt still does). Why: with `cone_gap`
-    /// off, a finger pad sliding on the other pad holds the Jordan product's vector part of its friction cone
-    /// near 3e-11 (the iterate's residual 1e-12, its mean complementarity 8e-13) and crawled
-    /// towards `kappa_tol` for the whole 200-iteration budget, then through two cold retries
-    /// that ended the same way (Panda, `step_bench` seed 12, step 261: 450 iterations). With
+    /// off, a finger pad sliding on the other pad holds the Jordan product's vector part of
+    /// its friction cone near 3e-11 (the iterate's residual 1e-12, its mean complementarity
+    /// 8e-13) and crawled towards `kappa_tol` for the whole 200-iteration budget, then through
+    /// two cold retries that ended the same way (Panda, `step_bench` seed 12, step 261: 450 iterations). With
     /// `cone_gap` on, the same states (`option_ab MODEL.xml 300 SEED acceptable_iter 0 15`):
     /// Panda seed 10 2452 → 1798 iterations (1.58 → 0.50 s), seed 12 2431 → 2226, X2 seed 8
     /// 1294 → 908; the humanoid and the A1 unchanged.

@@ -10,7 +10,8 @@
 //! violation metrics of eqs. 49-50. When the line search fails, or three steps in a row are
 //! shorter than 1e-3, the cones that block the direction are moved onto the central path at
 //! the current mean complementarity ([`super::central::unblock`]; at most five times a solve)
-//! and the iteration goes on from there.
+//! and the iteration goes on from there. An acceptable iterate that stalls near the tight
+//! tolerances ends the solve as `Acceptable` (`Options::acceptable_iter`).
 //! The unknowns are velocities, so every iterate's orientation `q ⊗ f(ω⁺)` is exactly unit
 //! (the quaternion-aware update of eq. 48 holds by construction).
 use super::inequality::{
@@ -79,11 +80,11 @@ const WIDEN_SLACK: f64 = 1e-2;
 pub(crate) const ENDGAME_RESIDUAL: f64 = 1e-4;
 
 /// How near the tight tolerances (`max(r / rtol, k / kappa_tol)`) an acceptable iterate must
-/// be for a stall there to end the solve (`Options::acceptable_iter`). Measured on the same
-/// states (`option_ab`, 300 steps, seeds 5..12): every early stop of the Panda's and the
-/// rolling ball's finger-pad and cone stalls sat below 10; a bound at the acceptable tolerances
-/// instead also cut an A1 step that converged in 39 iterations at 20, with k = 9.4e-9 and its
-/// next positions 2.2e-5 m off.
+/// be for a stall there to end the solve (`Options::acceptable_iter`). The stalls that
+/// motivated it sat at 3.5 (Panda, `step_bench` seed 12, step 261) and 8.7 (the rolling ball
+/// of `engine/tests/rolling.rs` in a trial build). Without this bound, only the acceptable
+/// tolerances, the early stop also cut an A1 step (`option_ab a1.xml 300 8`, step 75) that
+/// converges in 39 iterations at 20, with k = 9.4e-9 and its next positions 2.2e-5 m off.
 const STALL_NEAR: f64 = 100.0;
 
 /// Largest fraction to the boundary.
