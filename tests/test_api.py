@@ -128,6 +128,19 @@ def test_iteration_counts_reject_negative_values_by_name(pend):
     assert pend.with_options(endgame_iter=0).options["endgame_iter"] == 0
 
 
+def test_switch_options_must_be_bools_and_are_named(pend):
+    # 1, "yes" or None-like strings would be silent typos: a TypeError that names the option
+    for name in ("warm_start", "nt_scaling", "central_warm_start", "cone_gap"):
+        for bad in ("yes", 1, 0.0):
+            with pytest.raises(TypeError, match=name):
+                pend.with_options(**{name: bad})
+    # the switches take effect (the options dict holds the numeric ones only)
+    s0 = pend.make_state(qpos=[0.3])
+    a, _ = ukemi.step(pend.with_options(cone_gap=False, nt_scaling=False), s0)
+    b, _ = ukemi.step(pend, s0)
+    np.testing.assert_allclose(a.qpos, b.qpos, atol=1e-12)  # no contact: the same step
+
+
 def test_warm_start_margin_is_an_option_and_validated(pend):
     # a resting sphere warm-started with any margin stays at rest (the margin changes only the
     # interior-point start); bad margins name the field

@@ -524,16 +524,16 @@ impl PyModel {
         max_iter: Option<i64>,
         endgame_iter: Option<i64>,
         acceptable_iter: Option<i64>,
-        cone_gap: Option<bool>,
+        cone_gap: Option<Bound<'_, PyAny>>,
         max_ls: Option<i64>,
         undercut: Option<f64>,
-        warm_start: Option<bool>,
+        warm_start: Option<Bound<'_, PyAny>>,
         warm_start_margin: Option<f64>,
         regularization: Option<f64>,
         kappa_grad: Option<f64>,
         activation_margin: Option<f64>,
-        nt_scaling: Option<bool>,
-        central_warm_start: Option<bool>,
+        nt_scaling: Option<Bound<'_, PyAny>>,
+        central_warm_start: Option<Bound<'_, PyAny>>,
         max_subdivisions: Option<i64>,
         energy_guard: Option<f64>,
         max_step_rotation: Option<f64>,
@@ -550,6 +550,18 @@ impl PyModel {
                         .py()
                 })
             }
+            // switches must be Python bools (1 or "yes" would be a silent typo): a named error
+            fn flag(name: &str, v: Option<Bound<'_, PyAny>>, now: bool) -> PyResult<bool> {
+                v.map_or(Ok(now), |v| {
+                    v.cast::<pyo3::types::PyBool>()
+                        .map(|b| b.is_true())
+                        .map_err(|_| {
+                            pyo3::exceptions::PyTypeError::new_err(format!(
+                                "`{name}` must be True or False, got {v}"
+                            ))
+                        })
+                })
+            }
             let mut o = self.inner.options.clone();
             o.timestep = timestep.unwrap_or(o.timestep);
             o.gravity = gravity.map(Vector3::from).unwrap_or(o.gravity);
@@ -557,17 +569,21 @@ impl PyModel {
             o.max_iter = count("max_iter", max_iter, o.max_iter)?;
             o.endgame_iter = count("endgame_iter", endgame_iter, o.endgame_iter)?;
             o.acceptable_iter = count("acceptable_iter", acceptable_iter, o.acceptable_iter)?;
-            o.cone_gap = cone_gap.unwrap_or(o.cone_gap);
+            o.cone_gap = flag("cone_gap", cone_gap, o.cone_gap)?;
             o.max_ls = count("max_ls", max_ls, o.max_ls)?;
             o.regularization = regularization.unwrap_or(o.regularization);
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);
             o.acceptable_rtol = acceptable_rtol.unwrap_or(o.acceptable_rtol);
             o.acceptable_kappa_tol = acceptable_kappa_tol.unwrap_or(o.acceptable_kappa_tol);
             o.undercut = undercut.unwrap_or(o.undercut);
-            o.warm_start = warm_start.unwrap_or(o.warm_start);
+            o.warm_start = flag("warm_start", warm_start, o.warm_start)?;
             o.warm_start_margin = warm_start_margin.unwrap_or(o.warm_start_margin);
-            o.nt_scaling = nt_scaling.unwrap_or(o.nt_scaling);
-            o.central_warm_start = central_warm_start.unwrap_or(o.central_warm_start);
+            o.nt_scaling = flag("nt_scaling", nt_scaling, o.nt_scaling)?;
+            o.central_warm_start = flag(
+                "central_warm_start",
+                central_warm_start,
+                o.central_warm_start,
+            )?;
             o.max_subdivisions = count("max_subdivisions", max_subdivisions, o.max_subdivisions)?;
             o.energy_guard = energy_guard.unwrap_or(o.energy_guard);
             // max_step_rotation = inf turns the rotation limit off
