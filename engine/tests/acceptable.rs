@@ -126,10 +126,11 @@ fn acceptable_iter_still_retries_acceptable_attempts_far_from_the_tight_toleranc
 
 #[test]
 fn the_pandas_finger_pad_stalls_end_early_on_the_same_states() {
-    // the shared Panda, Table V workload (`step_bench panda.xml 300 1 SEED`, seeds 10 and 12):
-    // its finger pads pressed together stall a few kappa_tol above kappa_tol (seed 12 step 261:
-    // 450 iterations). Every step of the runs without the early stop is also solved from the
-    // same state with it
+    // the shared Panda, Table V workload (`step_bench panda.xml 300 1 SEED`, seeds 5 and 11):
+    // its fingertips pressed together stall a few kappa_tol above kappa_tol (2026-12-03, before
+    // the pads' activation margin was capped at their size: seed 12 step 261, 450 iterations;
+    // since, seeds 5 and 11 stall in 1 and 2 steps, 3265 → 2987 and 3320 → 3048 iterations).
+    // Every step of the runs without the early stop is also solved from the same state with it
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models/panda.xml");
     if !path.exists() {
@@ -144,7 +145,7 @@ fn the_pandas_finger_pad_stalls_end_early_on_the_same_states() {
     o.acceptable_iter = 0;
     let full = early.with_options(o.clone()).unwrap();
     let (mut its_early, mut its_full, mut stopped, mut worst) = (0, 0, 0, 0.0f64);
-    for seed in [10, 12] {
+    for seed in [5, 11] {
         let mut state = workload::start_state(&early);
         let mut ws = [Workspace::new(&early), Workspace::new(&full)];
         let mut controls = workload::Controls::with_seed(seed);

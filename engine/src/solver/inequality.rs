@@ -277,7 +277,6 @@ pub(crate) fn widen(model: &Model, ws: &mut Workspace, impulse: f64, slack: f64)
 /// and its data are computed if it is activated ([`ensure_prepared`]). Measured 2026-12-02:
 /// the narrow phase of every candidate was 11% of an A1 step (1024 candidates).
 pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
-    let margin = model.options.activation_margin;
     let h = model.options.timestep;
     let drift = h * h * model.options.gravity.norm();
     for (g, geom) in model.geoms.iter().enumerate() {
@@ -285,6 +284,7 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     }
     let mut memo = crate::contact::BoxPairMemo::default();
     for (c, contact) in model.contacts.iter().enumerate() {
+        let margin = candidate_margin(model, contact);
         if !ws.active[c] && margin.is_finite() {
             let (a, b) = (
                 &ws.geom_bounds[contact.geom_a],
@@ -460,7 +460,8 @@ fn bounding_radius(shape: &crate::contact::geometry::Shape) -> f64 {
 }
 
 /// Add to the step the candidates within reach (after [`prepare`]): those whose current
-/// distance is within `activation_margin + h (2 u + h |g|)`, with the approach speed `u` as
+/// distance is within `margin + h (2 u + h |g|)` (the candidate's margin:
+/// [`candidate_margin`]), with the approach speed `u` as
 /// `reach` says. The step starts with [`Reach::Approach`], the rate at which the witness points
 /// close along the normal: measured 2026-12-02 (`step_bench`, seed 5, 300 steps), it keeps
 /// 11.6 of the A1's 1024 candidates active per step instead of 54.4 under [`Reach::Bound`]
@@ -486,6 +487,7 @@ pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace, reach: 
     let h = model.options.timestep;
     let drift = h * h * model.options.gravity.norm();
     for (c, contact) in model.contacts.iter().enumerate() {
+        let margin = candidate_margin(model, contact);
         let speed = match reach {
             Reach::All => unreachable!(),
             Reach::Approach => (-ws.contact_rate_now[c]).max(0.0),
@@ -501,6 +503,31 @@ pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace, reach: 
         ws.active[c] |= phi.is_nan() || reach.is_nan() || phi <= reach;
     }
     ws.active_contacts() - before + limits
+}
+
+/// The activation margin of candidate `contact` ([`activate`], [`missed_contacts`]):
+/// `Options::activation_margin`, but at most the bounding radius of the pair's smaller geom
+/// (a point, of radius 0, does not count as the smaller).
+///
+/// Why: the margin is a buffer against the approach-rate estimate, in metres, sized for
+/// links; pairs of small geoms sat active at several times their own size. The Panda's
+/// fingertip pads (boxes of bounding radius 4.7 mm) made 16 corner candidates per pad pair
+/// within the 1 cm margin whenever the fingers were less than 1 cm apart: 15.4–25.5 of its
+/// 835 candidates active per Table V step (`step_bench panda.xml 300 1 SEED`, seeds 9..12),
+/// about one with an impulse. Measured on the same states (`option_ab panda.xml 300 SEED`,
+/// the cap against the plain margin), seeds 9/10/11/12: 1738 → 1720, 1743 → 1772,
+/// 3876 → 3082, 2225 → 2129 iterations and 0.187 → 0.142, 0.266 → 0.249, 2.09 → 1.20,
+/// 0.37 → 0.21 s, every step converged, positions within 1e-5 m. The shared humanoid, A1 and X2
+/// have no geom smaller than the margin: their steps are bit for bit the same.
+pub(crate) fn candidate_margin(model: &Model, contact: &crate::contact::Contact) -> f64 {
+    let size = |g: usize| match bounding_radius(&model.geoms[g].shape) {
+        r if r > 0.0 => r,
+        _ => f64::INFINITY,
+    };
+    model
+        .options
+        .activation_margin
+        .min(size(contact.geom_a).min(size(contact.geom_b)))
 }
 
 /// Reach of a joint limit's activation (rad or m) before the rate term: [`activate_limits`].
@@ -674,10 +701,10 @@ fn relative_speed(state: &State, ga: &crate::contact::Geom, gb: &crate::contact:
 }
 
 /// After a solve with some candidates inactive: activate every inactive candidate whose
-/// distance at the new configuration (`ws.next_pose`) is below `activation_margin / 4`;
+/// distance at the new configuration (`ws.next_pose`) is below a quarter of its margin
+/// ([`candidate_margin`]);
 /// returns how many were activated (the step must then be solved again).
 pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
-    let floor = 0.25 * model.options.activation_margin;
     let mut n = 0;
     let next = std::mem::take(&mut ws.next_pose);
     let pose = |x: usize| if x == 0 { Pose::world() } else { next[x] };
@@ -688,6 +715,7 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
         if ws.active[c] {
             continue;
         }
+        let floor = 0.25 * candidate_margin(model, contact);
         // far apart by the geoms' bounding spheres: no narrow phase (a frozen feature is
         // measured against its own plane, which such a bound does not cover)
         let (a, b) = (
