@@ -5,7 +5,9 @@
 //! STEP (attempt, residual, complementarity, μ, affine and accepted step lengths, whether the
 //! corrected direction was taken). Attempts restart per sub-step of a subdivided step.
 //! `UKEMI_TRACE_MAX_ITER=N` solves the traced step (only) with an iteration budget of N, and
-//! `UKEMI_TRACE_CTRL=u1,u2,...` with those controls.
+//! `UKEMI_TRACE_CTRL=u1,u2,...` with those controls. `UKEMI_TRACE_CTRLS=FILE` takes every
+//! step's controls from FILE, one step per line, comma- or space-separated (e.g. a Python
+//! run's controls written with `np.savetxt(FILE, ctrls, delimiter=",")`).
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{Workspace, step};
 
@@ -26,8 +28,24 @@ fn main() {
     let given: Option<Vec<f64>> = std::env::var("UKEMI_TRACE_CTRL")
         .ok()
         .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect());
+    // UKEMI_TRACE_CTRLS=FILE: each step's controls from a file, one line per step
+    let from_file: Option<Vec<Vec<f64>>> = std::env::var("UKEMI_TRACE_CTRLS").ok().map(|f| {
+        std::fs::read_to_string(&f)
+            .unwrap()
+            .lines()
+            .map(|l| {
+                l.split([',', ' '])
+                    .filter(|x| !x.is_empty())
+                    .map(|x| x.trim().parse().unwrap())
+                    .collect()
+            })
+            .collect()
+    });
     for k in 0..=which {
         let mut ctrl = controls.next(&model);
+        if let Some(rows) = &from_file {
+            ctrl.clone_from(&rows[k]);
+        }
         if let (true, Some(u)) = (k == which, &given) {
             ctrl.clone_from(u);
         }
