@@ -416,6 +416,9 @@ pub struct Workspace {
     pub(crate) prepared: Vec<bool>,
     /// Each geom's bounding sphere and speed at the current configuration (`prepare`).
     pub(crate) geom_bounds: Vec<crate::solver::inequality::GeomBound>,
+    /// Each geom's body pose and world poses, current and predicted, for one pass of
+    /// `inequality::prepare` (see `inequality::GeomPoses`).
+    pub(crate) geom_poses: Vec<crate::solver::inequality::GeomPoses>,
     /// Impulse rows and no-slip measures of the step (current configuration, built on first
     /// use).
     pub(crate) contact_step: Vec<crate::contact::StepRows>,
@@ -690,6 +693,7 @@ impl Workspace {
             contact_rate_now: vec![0.0; model.ncontact()],
             prepared: vec![false; model.ncontact()],
             geom_bounds: vec![Default::default(); model.geoms.len()],
+            geom_poses: vec![Default::default(); model.geoms.len()],
             contact_step: vec![Default::default(); model.ncontact()],
             frozen: vec![None; model.ncontact()],
             contact_phi: vec![0.0; model.ncontact()],

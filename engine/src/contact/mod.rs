@@ -250,23 +250,34 @@ pub fn witness_frozen(
     let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
     let (pa, pb) = (pose(ga.body), pose(gb.body));
     let (wa, wb) = (ga.world_pose(&pa), gb.world_pose(&pb));
-    let w = match (frozen, &c.feature) {
+    (witness_frozen_at(c, geoms, (&wa, &wb), frozen), pa, pb)
+}
+
+/// [`witness_frozen`] at the geoms' world poses `wa`, `wb` (already composed with their bodies'
+/// poses).
+pub fn witness_frozen_at(
+    c: &Contact,
+    geoms: &[Geom],
+    (wa, wb): (&GeomPose, &GeomPose),
+    frozen: Option<Frozen>,
+) -> Witness {
+    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
+    match (frozen, &c.feature) {
         (Some(Frozen::Rim(center)), _) => {
             let a = geometry::Ball {
                 center,
                 radius: 0.0,
             };
-            geometry::evaluate(&Feature::SpherePlane { a }, &ga.shape, &wa, &gb.shape, &wb)
+            geometry::evaluate(&Feature::SpherePlane { a }, &ga.shape, wa, &gb.shape, wb)
         }
         (Some(Frozen::Face { axis, sign }), Feature::SphereBox { a, half_extents_b }) => {
-            geometry::ball_box_face(a, &wa, half_extents_b, &wb, axis, sign)
+            geometry::ball_box_face(a, wa, half_extents_b, wb, axis, sign)
         }
         (Some(Frozen::Face { axis, sign }), Feature::BoxSphere { half_extents_a, b }) => {
-            geometry::box_face_ball(half_extents_a, &wa, b, &wb, axis, sign)
+            geometry::box_face_ball(half_extents_a, wa, b, wb, axis, sign)
         }
-        _ => geometry::evaluate(&c.feature, &ga.shape, &wa, &gb.shape, &wb),
-    };
-    (w, pa, pb)
+        _ => geometry::evaluate(&c.feature, &ga.shape, wa, &gb.shape, wb),
+    }
 }
 
 /// The feature of candidate `c` to hold fixed for a step from the bodies' current poses
@@ -276,25 +287,33 @@ pub fn witness_frozen(
 pub fn freeze_for_step(
     c: &Contact,
     geoms: &[Geom],
-    now: (&Pose, &Pose),
-    predicted: (&Pose, &Pose),
-) -> Option<Frozen> {
-    freeze_for_step_with(c, geoms, now, predicted, &mut BoxPairMemo::default())
-}
-
-/// [`freeze_for_step`] reusing `memo` for the candidates of one box pair (see [`BoxPairMemo`]).
-pub fn freeze_for_step_with(
-    c: &Contact,
-    geoms: &[Geom],
     (now_a, now_b): (&Pose, &Pose),
     (predicted_a, predicted_b): (&Pose, &Pose),
+) -> Option<Frozen> {
+    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
+    let now = (ga.world_pose(now_a), gb.world_pose(now_b));
+    let ahead = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
+    freeze_for_step_at(
+        c,
+        geoms,
+        (&now.0, &now.1),
+        (&ahead.0, &ahead.1),
+        &mut BoxPairMemo::default(),
+    )
+}
+
+/// [`freeze_for_step`] at the geoms' world poses, current (`now`) and predicted (`ahead`),
+/// reusing `memo` for the candidates of one box pair (see [`BoxPairMemo`]).
+pub fn freeze_for_step_at(
+    c: &Contact,
+    geoms: &[Geom],
+    now: (&GeomPose, &GeomPose),
+    ahead: (&GeomPose, &GeomPose),
     memo: &mut BoxPairMemo,
 ) -> Option<Frozen> {
-    disk_rim_for_step(c, geoms, predicted_a, predicted_b, false)
+    disk_rim_at(c, ahead, false)
         .map(Frozen::Rim)
-        .or_else(|| {
-            box_face_for_step_with(c, geoms, (now_a, now_b), (predicted_a, predicted_b), memo)
-        })
+        .or_else(|| box_face_at(c, geoms, now, ahead, memo))
 }
 
 /// The separating axis [`box_face_for_step`] found for the last box pair it measured, `(geom a,
@@ -353,18 +372,28 @@ const FACE_EDGE_TOL: f64 = 1e-6;
 pub fn box_face_for_step(
     c: &Contact,
     geoms: &[Geom],
-    now: (&Pose, &Pose),
-    predicted: (&Pose, &Pose),
-) -> Option<Frozen> {
-    box_face_for_step_with(c, geoms, now, predicted, &mut BoxPairMemo::default())
-}
-
-/// [`box_face_for_step`] reusing `memo` for the candidates of one box pair.
-pub fn box_face_for_step_with(
-    c: &Contact,
-    geoms: &[Geom],
     (now_a, now_b): (&Pose, &Pose),
     (predicted_a, predicted_b): (&Pose, &Pose),
+) -> Option<Frozen> {
+    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
+    let now = (ga.world_pose(now_a), gb.world_pose(now_b));
+    let ahead = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
+    box_face_at(
+        c,
+        geoms,
+        (&now.0, &now.1),
+        (&ahead.0, &ahead.1),
+        &mut BoxPairMemo::default(),
+    )
+}
+
+/// [`box_face_for_step`] at the geoms' world poses, current (`now`) and predicted (`ahead`),
+/// reusing `memo` for the candidates of one box pair.
+fn box_face_at(
+    c: &Contact,
+    geoms: &[Geom],
+    (na, nb): (&GeomPose, &GeomPose),
+    (pa, pb): (&GeomPose, &GeomPose),
     memo: &mut BoxPairMemo,
 ) -> Option<Frozen> {
     let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
@@ -376,14 +405,12 @@ pub fn box_face_for_step_with(
     let (pa, pb, normal) = match memo.last {
         Some((k, axis)) if k == key => axis,
         _ => {
-            let (na, nb) = (ga.world_pose(now_a), gb.world_pose(now_b));
-            let (separation, normal_now) = geometry::box_box_axis(ha, &na, hb, &nb);
+            let (separation, normal_now) = geometry::box_box_axis(ha, na, hb, nb);
             let axis = if separation > 0.0 {
-                (na, nb, normal_now)
+                (*na, *nb, normal_now)
             } else {
-                let (pa, pb) = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
-                let (_, normal) = geometry::box_box_axis(ha, &pa, hb, &pb); // from B towards A
-                (pa, pb, normal)
+                let (_, normal) = geometry::box_box_axis(ha, pa, hb, pb); // from B towards A
+                (*pa, *pb, normal)
             };
             memo.last = Some((key, axis));
             axis
@@ -428,11 +455,19 @@ pub fn disk_rim_for_step(
     predicted_b: &Pose,
     force: bool,
 ) -> Option<Vector3<f64>> {
+    if !matches!(c.feature, Feature::DiskPlane { .. }) {
+        return None;
+    }
+    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
+    let (pa, pb) = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
+    disk_rim_at(c, (&pa, &pb), force)
+}
+
+/// [`disk_rim_for_step`] at the geoms' world poses `pa`, `pb`.
+fn disk_rim_at(c: &Contact, (pa, pb): (&GeomPose, &GeomPose), force: bool) -> Option<Vector3<f64>> {
     let Feature::DiskPlane { center_a, radius_a } = &c.feature else {
         return None;
     };
-    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
-    let (pa, pb) = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
     // plane normal in A's geom frame; its x, y part is the in-disk direction
     let n_local = pa.rot.transpose() * pb.rot.column(2);
     let in_disk = Vector3::new(n_local[0], n_local[1], 0.0);
