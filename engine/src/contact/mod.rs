@@ -287,19 +287,34 @@ pub fn witness_frozen_at(
 pub fn freeze_for_step(
     c: &Contact,
     geoms: &[Geom],
-    (now_a, now_b): (&Pose, &Pose),
-    (predicted_a, predicted_b): (&Pose, &Pose),
+    now: (&Pose, &Pose),
+    predicted: (&Pose, &Pose),
 ) -> Option<Frozen> {
-    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
-    let now = (ga.world_pose(now_a), gb.world_pose(now_b));
-    let ahead = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
+    let [na, nb, pa, pb] = pair_world_poses(c, geoms, now, predicted);
     freeze_for_step_at(
         c,
         geoms,
-        (&now.0, &now.1),
-        (&ahead.0, &ahead.1),
+        (&na, &nb),
+        (&pa, &pb),
         &mut BoxPairMemo::default(),
     )
+}
+
+/// World poses of candidate `c`'s geoms `[A now, B now, A predicted, B predicted]` from their
+/// bodies' poses.
+fn pair_world_poses(
+    c: &Contact,
+    geoms: &[Geom],
+    (now_a, now_b): (&Pose, &Pose),
+    (predicted_a, predicted_b): (&Pose, &Pose),
+) -> [GeomPose; 4] {
+    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
+    [
+        ga.world_pose(now_a),
+        gb.world_pose(now_b),
+        ga.world_pose(predicted_a),
+        gb.world_pose(predicted_b),
+    ]
 }
 
 /// [`freeze_for_step`] at the geoms' world poses, current (`now`) and predicted (`ahead`),
@@ -372,17 +387,15 @@ const FACE_EDGE_TOL: f64 = 1e-6;
 pub fn box_face_for_step(
     c: &Contact,
     geoms: &[Geom],
-    (now_a, now_b): (&Pose, &Pose),
-    (predicted_a, predicted_b): (&Pose, &Pose),
+    now: (&Pose, &Pose),
+    predicted: (&Pose, &Pose),
 ) -> Option<Frozen> {
-    let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
-    let now = (ga.world_pose(now_a), gb.world_pose(now_b));
-    let ahead = (ga.world_pose(predicted_a), gb.world_pose(predicted_b));
+    let [na, nb, pa, pb] = pair_world_poses(c, geoms, now, predicted);
     box_face_at(
         c,
         geoms,
-        (&now.0, &now.1),
-        (&ahead.0, &ahead.1),
+        (&na, &nb),
+        (&pa, &pb),
         &mut BoxPairMemo::default(),
     )
 }
