@@ -180,6 +180,13 @@ pub struct GeomPose {
     pub rot: Matrix3<f64>,
 }
 
+impl Default for GeomPose {
+    /// The world frame.
+    fn default() -> Self {
+        Self::new(Vector3::zeros(), Matrix3::identity())
+    }
+}
+
 impl GeomPose {
     /// Pose from a position and a rotation matrix.
     pub fn new(pos: Vector3<f64>, rot: Matrix3<f64>) -> Self {

@@ -303,7 +303,7 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
             }
         }
         if !posed {
-            GeomPoses::fill(model, state, &mut poses);
+            GeomPoses::fill(model, state, &ws.geom_bounds, &mut poses);
             posed = true;
         }
         let [a, b] = [contact.geom_a, contact.geom_b].map(|g| &poses[g]);
@@ -328,11 +328,10 @@ pub(crate) struct GeomPoses {
 
 impl Default for GeomPoses {
     fn default() -> Self {
-        let world = GeomPose::new(Vector3::zeros(), nalgebra::Matrix3::identity());
         Self {
             body: Pose::world(),
-            now: world,
-            ahead: world,
+            now: GeomPose::default(),
+            ahead: GeomPose::default(),
         }
     }
 }
@@ -341,11 +340,7 @@ impl GeomPoses {
     /// The poses of geom `geom` at `state`.
     fn of(model: &Model, state: &State, geom: &crate::contact::Geom) -> Self {
         let h = model.options.timestep;
-        let body = if geom.body == 0 {
-            Pose::world()
-        } else {
-            state.pose(geom.body)
-        };
+        let body = body_pose(state, geom.body);
         Self {
             body,
             now: geom.world_pose(&body),
@@ -353,12 +348,23 @@ impl GeomPoses {
         }
     }
 
-    /// The poses of every geom at `state`.
-    fn fill(model: &Model, state: &State, out: &mut [GeomPoses]) {
+    /// The poses of every geom at `state`, the current world poses taken from `bounds` (the
+    /// geoms' bounds at `state`).
+    fn fill(model: &Model, state: &State, bounds: &[GeomBound], out: &mut [GeomPoses]) {
+        let h = model.options.timestep;
         for (g, geom) in model.geoms.iter().enumerate() {
-            out[g] = Self::of(model, state, geom);
+            out[g] = Self {
+                body: body_pose(state, geom.body),
+                now: bounds[g].frame,
+                ahead: geom.world_pose(&predicted_pose(state, geom.body, h)),
+            };
         }
     }
+}
+
+/// The pose of body `b` at `state` (the world frame for body 0).
+fn body_pose(state: &State, b: usize) -> Pose {
+    if b == 0 { Pose::world() } else { state.pose(b) }
 }
 
 /// A geom's bounding sphere at the current configuration and the fastest any of its points
@@ -366,6 +372,8 @@ impl GeomPoses {
 /// point of it, `normal` its outward normal) and is only bounded when on the world.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct GeomBound {
+    /// The geom's world pose, which the narrow phase reuses.
+    frame: GeomPose,
     centre: Vector3<f64>,
     normal: Vector3<f64>,
     radius: f64,
@@ -374,11 +382,7 @@ pub(crate) struct GeomBound {
 
 impl GeomBound {
     fn new(state: &State, geom: &crate::contact::Geom) -> Self {
-        let pose = if geom.body == 0 {
-            Pose::world()
-        } else {
-            state.pose(geom.body)
-        };
+        let pose = body_pose(state, geom.body);
         let mut bound = Self::at(geom, &pose);
         if geom.body != 0 && bound.radius.is_finite() {
             let (v, w) = state.velocity(geom.body);
@@ -398,6 +402,7 @@ impl GeomBound {
             r => r,
         };
         GeomBound {
+            frame,
             centre: frame.pos,
             normal: frame.rot.column(2).into_owned(),
             radius,
@@ -795,7 +800,12 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
         if ws.frozen[c].is_none() && a.gap(b) > floor {
             continue;
         }
-        let (wit, _, _) = witness_frozen(contact, &model.geoms, pose, ws.frozen[c]);
+        let wit = crate::contact::witness_frozen_at(
+            contact,
+            &model.geoms,
+            (&a.frame, &b.frame),
+            ws.frozen[c],
+        );
         if wit.phi.is_nan() || wit.phi <= floor {
             ws.active[c] = true;
             n += 1;
