@@ -6,7 +6,7 @@
 //! corrected direction was taken). Attempts restart per sub-step of a subdivided step.
 //! `UKEMI_TRACE_MAX_ITER=N` solves the traced step (only) with an iteration budget of N, and
 //! `UKEMI_TRACE_CTRL=u1,u2,...` with those controls. `UKEMI_TRACE_CTRLS=FILE` takes every
-//! step's controls from FILE, one step per line, comma- or space-separated (e.g. a Python
+//! step's controls from FILE, one step per line, separated by commas or white space (e.g. a Python
 //! run's controls written with `np.savetxt(FILE, ctrls, delimiter=",")`).
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{Workspace, step};
@@ -34,9 +34,9 @@ fn main() {
             .unwrap()
             .lines()
             .map(|l| {
-                l.split([',', ' '])
+                l.split(|c: char| c == ',' || c.is_whitespace())
                     .filter(|x| !x.is_empty())
-                    .map(|x| x.trim().parse().unwrap())
+                    .map(|x| x.parse().unwrap())
                     .collect()
             })
             .collect()
@@ -44,7 +44,17 @@ fn main() {
     for k in 0..=which {
         let mut ctrl = controls.next(&model);
         if let Some(rows) = &from_file {
-            ctrl.clone_from(&rows[k]);
+            let row = rows
+                .get(k)
+                .unwrap_or_else(|| panic!("no controls for step {k} in the file"));
+            assert_eq!(
+                row.len(),
+                model.nu(),
+                "step {k}: {} controls, the model has {}",
+                row.len(),
+                model.nu()
+            );
+            ctrl.clone_from(row);
         }
         if let (true, Some(u)) = (k == which, &given) {
             ctrl.clone_from(u);

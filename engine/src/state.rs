@@ -412,13 +412,13 @@ pub struct Workspace {
     pub(crate) contact_rate_now: Vec<f64>,
     /// Whether each candidate's current-configuration data (`frozen`, `contact_phi_now`,
     /// `contact_rate_now`, `contact_step`) were computed this step; a candidate out of any
-    /// activation's reach skips them (`inequality::prepare`) until it is activated.
+    /// activation's reach skips them (`activation::prepare`) until it is activated.
     pub(crate) prepared: Vec<bool>,
     /// Each geom's bounding sphere and speed at the current configuration (`prepare`).
-    pub(crate) geom_bounds: Vec<crate::solver::inequality::GeomBound>,
+    pub(crate) geom_bounds: Vec<crate::solver::activation::GeomBound>,
     /// Each geom's body pose and world poses, current and predicted, for one pass of
-    /// `inequality::prepare` (see `inequality::GeomPoses`).
-    pub(crate) geom_poses: Vec<crate::solver::inequality::GeomPoses>,
+    /// `activation::prepare` (see `activation::GeomPoses`).
+    pub(crate) geom_poses: Vec<crate::solver::activation::GeomPoses>,
     /// Impulse rows and no-slip measures of the step (current configuration, built on first
     /// use).
     pub(crate) contact_step: Vec<crate::contact::StepRows>,

@@ -290,6 +290,10 @@ pub fn freeze_for_step(
     now: (&Pose, &Pose),
     predicted: (&Pose, &Pose),
 ) -> Option<Frozen> {
+    let disk = matches!(c.feature, Feature::DiskPlane { .. });
+    if !disk && !box_pair(c, geoms) {
+        return None;
+    }
     let [na, nb, pa, pb] = pair_world_poses(c, geoms, now, predicted);
     freeze_for_step_at(
         c,
@@ -297,6 +301,14 @@ pub fn freeze_for_step(
         (&na, &nb),
         (&pa, &pb),
         &mut BoxPairMemo::default(),
+    )
+}
+
+/// Whether candidate `c` is between two boxes.
+fn box_pair(c: &Contact, geoms: &[Geom]) -> bool {
+    matches!(
+        (&geoms[c.geom_a].shape, &geoms[c.geom_b].shape),
+        (Shape::Box { .. }, Shape::Box { .. })
     )
 }
 
@@ -390,6 +402,9 @@ pub fn box_face_for_step(
     now: (&Pose, &Pose),
     predicted: (&Pose, &Pose),
 ) -> Option<Frozen> {
+    if !box_pair(c, geoms) {
+        return None;
+    }
     let [na, nb, pa, pb] = pair_world_poses(c, geoms, now, predicted);
     box_face_at(
         c,

@@ -55,7 +55,7 @@ use crate::contact::Frozen;
 use crate::math::quat;
 use crate::model::Model;
 use crate::model::topology_body_node as body_node;
-use crate::solver::{central, inequality, newton};
+use crate::solver::{activation, central, newton};
 use crate::state::{Recycled, SolveStatus, State, StepReport, Workspace};
 use crate::step::{AppliedForces, validate_inputs};
 use crate::{Error, Result, ensure};
@@ -472,7 +472,7 @@ impl SolveLinearization {
         ws.saturated.copy_from_slice(&stored.saturated);
         // the features the solve ended with (`evaluate` prepares no candidate prepared here)
         for &(c, frozen) in &stored.frozen {
-            inequality::prepare_candidate_holding(model, &point.state, &mut ws, c, frozen);
+            activation::prepare_candidate_holding(model, &point.state, &mut ws, c, frozen);
         }
         newton::evaluate(model, &point.state, &mut ws, false, 0.0);
         let mut next = point.state.clone();

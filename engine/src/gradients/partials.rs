@@ -268,7 +268,7 @@ impl<'a> Probe<'a> {
         let active = std::mem::take(&mut self.ws.active);
         for c in crate::solver::inequality::active_candidates(&active[..model.ncontact()]) {
             let (state, f) = (&self.state, self.frozen[c]);
-            crate::solver::inequality::prepare_candidate_holding(model, state, &mut self.ws, c, f);
+            crate::solver::activation::prepare_candidate_holding(model, state, &mut self.ws, c, f);
         }
         self.ws.active = active;
         newton::evaluate_in(model, &self.state, &mut self.ws, w, &mut self.residual, 0.0);
@@ -294,11 +294,11 @@ impl<'a> Probe<'a> {
         let nc = model.ncontact();
         self.ws.active[..nc].fill(false);
         self.ws.active[nc..].copy_from_slice(&active[nc..]);
-        // the contact frames (and frozen disk rim points) of `inequality::prepare`, for the
+        // the contact frames (and frozen disk rim points) of `activation::prepare`, for the
         // candidates that move
         for &c in contacts.iter().filter(|&&c| active[c]) {
             let f = self.frozen[c];
-            crate::solver::inequality::prepare_candidate_holding(model, state, &mut self.ws, c, f);
+            crate::solver::activation::prepare_candidate_holding(model, state, &mut self.ws, c, f);
             self.ws.active[c] = true;
         }
         newton::evaluate_in(model, state, &mut self.ws, w, &mut self.residual, 0.0);

@@ -88,9 +88,9 @@ pub struct Options {
     /// is checked at the new configuration and the step is solved again with it active if its
     /// distance fell below `activation_margin / 4`, so no contact the step makes is missed.
     /// A solve that fails with candidates left out is solved again with all of them active.
-    /// A pair of geoms smaller than the margin uses the bounding radius of the smaller one
-    /// instead (`solver::inequality::candidate_margin`: fingertip pads are not activated at
-    /// several times their own size).
+    /// A pair with a geom smaller than the margin uses that geom's bounding radius instead
+    /// (the smaller geom's; `solver::activation::candidate_margin`: fingertip pads are not
+    /// activated at several times their own size).
     /// Default 0.01 m; `f64::INFINITY` keeps every candidate active. Measured 2026-11-23
     /// (all-active → 0.01): 1000 random stress scenes 74 → 69 failing in half the time, the
     /// 14-sphere pyramid 19/500 unconverged steps → 0, every `cargo test` and pytest case as

@@ -1,5 +1,6 @@
 //! Nonlinear solve of one time step: Newton's method on the residual `F(z⁻, z, z⁺, j) = 0`
 //! (Dojo eq. 15) with the block-sparse graph factorisation of the Newton matrix.
+pub(crate) mod activation;
 pub(crate) mod actuation;
 pub(crate) mod armature;
 pub(crate) mod central;

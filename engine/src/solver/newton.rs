@@ -11,7 +11,7 @@
 //! domain): a too-fast spin ends as a reported failure, never a crash.
 use nalgebra::{Matrix3, Vector3};
 
-use super::inequality::Reach;
+use super::activation::Reach;
 use crate::integrator::variational::{momentum_residual, rot_jacobian};
 use crate::joints::Joint;
 use crate::joints::geometry::{JointFrame, Pose};
@@ -74,7 +74,7 @@ pub(crate) fn prepare_forces(
 ) {
     prepare_smooth_forces(model, state, ws, ctrl, forces);
     if model.topology.has_cones {
-        super::inequality::prepare(model, state, ws);
+        super::activation::prepare(model, state, ws);
     }
 }
 
@@ -182,7 +182,7 @@ pub(crate) fn prepare(
         ws.w[model.topology.pattern.offset(n)] = 0.0;
     }
     if model.topology.has_cones {
-        let _ = super::inequality::activate(model, state, ws, Reach::Approach);
+        let _ = super::activation::activate(model, state, ws, Reach::Approach);
         super::inequality::initialize(model, state, ws, model.options.warm_start);
     }
 }
@@ -419,7 +419,7 @@ pub(crate) fn evaluate_in(
     ws.kept.valid = false;
     if model.topology.has_cones {
         // candidates activated since `prepare` (a wider retry, a missed contact, a copied set)
-        super::inequality::ensure_prepared(model, state, ws);
+        super::activation::ensure_prepared(model, state, ws);
     }
     smooth_rows(model, state, ws, w, residual);
     if model.topology.has_cones {
@@ -739,7 +739,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             break;
         }
         // (a wider set that adds nothing would fail the same way)
-        if super::inequality::activate(model, state, ws, wider) == 0 {
+        if super::activation::activate(model, state, ws, wider) == 0 {
             continue;
         }
         let iterations = report.iterations;
@@ -758,9 +758,9 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
         if !report.status.is_success() {
             break;
         }
-        let missed = super::inequality::missed_contacts(model, ws)
-            + super::inequality::missed_limits(model, ws)
-            + super::inequality::refreeze_disks(model, ws);
+        let missed = super::activation::missed_contacts(model, ws)
+            + super::activation::missed_limits(model, ws)
+            + super::activation::refreeze_disks(model, ws);
         if missed == 0 {
             break;
         }

@@ -1,0 +1,698 @@
+//! Which contact candidates and joint limits take part in a step (Dojo's contact candidates
+//! with an activation heuristic, MuJoCo's broad phase in spirit): each candidate's data at the
+//! step's start ([`prepare`]), the activation by reach ([`activate`], [`Reach`],
+//! [`candidate_margin`]), and the checks after a solve that bring a missed contact or limit into
+//! the step ([`missed_contacts`], [`missed_limits`], [`refreeze_disks`]). Inactive candidates and
+//! limits carry no impulse and cost no solver work.
+use nalgebra::Vector3;
+
+use super::inequality::active_candidates;
+use crate::contact::geometry::GeomPose;
+use crate::contact::{Frozen, StepRows, predicted_pose, witness_frozen};
+use crate::joints::geometry::{JointFrame, Pose};
+use crate::model::Model;
+use crate::state::{State, Workspace};
+
+/// Contact frames at the current configuration (impulse directions, tangential velocity map),
+/// and the features held fixed for the step (near-flat disk rim points, box corners' faces:
+/// [`crate::contact::freeze_for_step`]).
+///
+/// An inactive candidate whose geoms' bounding spheres are apart by more than the step could
+/// close at their speeds (`margin + h (2 (u_a + u_b) + h |g|)`, the candidate's margin
+/// ([`candidate_margin`]), `u` the fastest any point of a geom moves) skips the narrow phase: its distance is recorded as that lower bound,
+/// and its data are computed if it is activated ([`ensure_prepared`]). Measured 2026-12-02:
+/// the narrow phase of every candidate was 11% of an A1 step (1024 candidates).
+pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
+    let h = model.options.timestep;
+    let drift = h * h * model.options.gravity.norm();
+    for (g, geom) in model.geoms.iter().enumerate() {
+        ws.geom_bounds[g] = GeomBound::new(state, geom);
+    }
+    let mut memo = crate::contact::BoxPairMemo::default();
+    let mut poses = std::mem::take(&mut ws.geom_poses);
+    let mut posed = false;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let margin = candidate_margin(model, contact);
+        if !ws.active[c] && margin.is_finite() {
+            let (a, b) = (
+                &ws.geom_bounds[contact.geom_a],
+                &ws.geom_bounds[contact.geom_b],
+            );
+            let gap = a.gap(b);
+            if gap > margin + 2.0 * h * (a.speed + b.speed) + drift {
+                ws.prepared[c] = false;
+                ws.frozen[c] = None;
+                ws.contact_phi_now[c] = gap;
+                ws.contact_rate_now[c] = 0.0;
+                continue;
+            }
+        }
+        if !posed {
+            GeomPoses::fill(model, state, &ws.geom_bounds, &mut poses);
+            posed = true;
+        }
+        let [a, b] = [contact.geom_a, contact.geom_b].map(|g| &poses[g]);
+        prepare_candidate_at(model, state, ws, c, (a, b), &mut memo);
+    }
+    ws.geom_poses = poses;
+}
+
+/// A geom's body pose and its world poses at the body's current pose and one step ahead at
+/// its current velocities ([`predicted_pose`]): what preparing a candidate reads, computed
+/// once per [`prepare`] pass rather than for each candidate. Measured 2026-12-03
+/// (callgrind, `gradient_phases panda.xml 100 none coloured`): preparing the 368 of the
+/// Panda's 835 candidates near enough per step was 12.9% of its instructions, the world
+/// poses, predicted poses and state reads in it about half of that (its 400 finger-pad
+/// corners share ten geoms).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GeomPoses {
+    body: Pose,
+    now: GeomPose,
+    ahead: GeomPose,
+}
+
+impl Default for GeomPoses {
+    fn default() -> Self {
+        Self {
+            body: Pose::world(),
+            now: GeomPose::default(),
+            ahead: GeomPose::default(),
+        }
+    }
+}
+
+impl GeomPoses {
+    /// The poses of geom `geom` at `state`.
+    fn of(model: &Model, state: &State, geom: &crate::contact::Geom) -> Self {
+        let h = model.options.timestep;
+        let body = body_pose(state, geom.body);
+        Self {
+            body,
+            now: geom.world_pose(&body),
+            ahead: geom.world_pose(&predicted_pose(state, geom.body, h)),
+        }
+    }
+
+    /// The poses of every geom at `state`, the current world poses taken from `bounds` (the
+    /// geoms' bounds at `state`).
+    fn fill(model: &Model, state: &State, bounds: &[GeomBound], out: &mut [GeomPoses]) {
+        let h = model.options.timestep;
+        for (g, geom) in model.geoms.iter().enumerate() {
+            out[g] = Self {
+                body: body_pose(state, geom.body),
+                now: bounds[g].frame,
+                ahead: geom.world_pose(&predicted_pose(state, geom.body, h)),
+            };
+        }
+    }
+}
+
+/// The pose of body `b` at `state` (the world frame for body 0).
+fn body_pose(state: &State, b: usize) -> Pose {
+    if b == 0 { Pose::world() } else { state.pose(b) }
+}
+
+/// A geom's bounding sphere at the current configuration and the fastest any of its points
+/// moves (world frame). A plane is bounded by its half-space (`radius` infinite, `centre` a
+/// point of it, `normal` its outward normal) and is only bounded when on the world.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct GeomBound {
+    /// The geom's world pose, which the narrow phase reuses.
+    frame: GeomPose,
+    centre: Vector3<f64>,
+    normal: Vector3<f64>,
+    radius: f64,
+    speed: f64,
+}
+
+impl GeomBound {
+    fn new(state: &State, geom: &crate::contact::Geom) -> Self {
+        let pose = body_pose(state, geom.body);
+        let mut bound = Self::at(geom, &pose);
+        if geom.body != 0 && bound.radius.is_finite() {
+            let (v, w) = state.velocity(geom.body);
+            let w = crate::math::quat::rotation(&pose.quat) * w;
+            bound.speed =
+                (v + w.cross(&(bound.centre - pose.pos))).norm() + w.norm() * bound.radius;
+        }
+        bound
+    }
+
+    /// The bounding sphere (or half-space) with the geom's body at `pose`, at rest. A plane on
+    /// a moving body bounds nothing (`radius` NaN): its half-space turns with the body.
+    fn at(geom: &crate::contact::Geom, pose: &Pose) -> Self {
+        let frame = geom.world_pose(pose);
+        let radius = match bounding_radius(&geom.shape) {
+            r if r.is_infinite() && geom.body != 0 => f64::NAN,
+            r => r,
+        };
+        GeomBound {
+            frame,
+            centre: frame.pos,
+            normal: frame.rot.column(2).into_owned(),
+            radius,
+            speed: 0.0,
+        }
+    }
+
+    /// A lower bound on the distance between the two geoms (−∞ when there is none).
+    fn gap(&self, other: &GeomBound) -> f64 {
+        let plane = |b: &GeomBound| b.radius == f64::INFINITY;
+        let sphere = |b: &GeomBound| b.radius.is_finite();
+        if sphere(self) && sphere(other) {
+            (self.centre - other.centre).norm() - self.radius - other.radius
+        } else if plane(self) && sphere(other) {
+            self.normal.dot(&(other.centre - self.centre)) - other.radius
+        } else if sphere(self) && plane(other) {
+            other.gap(self)
+        } else {
+            f64::NEG_INFINITY
+        }
+    }
+}
+
+/// [`prepare`] for every active candidate that it left out.
+pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) {
+    let active = std::mem::take(&mut ws.active);
+    let mut memo = crate::contact::BoxPairMemo::default();
+    for c in active_candidates(&active[..model.ncontact()]) {
+        if !ws.prepared[c] {
+            prepare_candidate_with(model, state, ws, c, &mut memo);
+        }
+    }
+    ws.active = active;
+}
+
+/// [`prepare`] for candidate `c` alone (its contact frame at `state` with the feature chosen
+/// at the state's predicted poses, as a solve prepares it), then holding `frozen` as the
+/// feature its gap at the next poses is measured with: the one the solve ended with, which
+/// [`refreeze_disks`] may have moved after the frame was prepared. The gradients linearise a
+/// solved step so, also at perturbed states (the features are material: a rim point or a face
+/// of the geom).
+pub(crate) fn prepare_candidate_holding(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    c: usize,
+    frozen: Option<Frozen>,
+) {
+    prepare_candidate_with(model, state, ws, c, &mut Default::default());
+    ws.frozen[c] = frozen;
+}
+
+/// [`prepare`] for candidate `c` within a pass over the candidates at `state` (`memo`: see
+/// [`crate::contact::BoxPairMemo`]).
+fn prepare_candidate_with(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    c: usize,
+    memo: &mut crate::contact::BoxPairMemo,
+) {
+    let contact = &model.contacts[c];
+    let [a, b] =
+        [contact.geom_a, contact.geom_b].map(|g| GeomPoses::of(model, state, &model.geoms[g]));
+    prepare_candidate_at(model, state, ws, c, (&a, &b), memo);
+}
+
+/// [`prepare_candidate_with`] with the poses of the candidate's geoms.
+fn prepare_candidate_at(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    c: usize,
+    (a, b): (&GeomPoses, &GeomPoses),
+    memo: &mut crate::contact::BoxPairMemo,
+) {
+    let contact = &model.contacts[c];
+    let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
+    ws.frozen[c] = crate::contact::freeze_for_step_at(
+        contact,
+        &model.geoms,
+        (&a.now, &b.now),
+        (&a.ahead, &b.ahead),
+        memo,
+    );
+    let w =
+        crate::contact::witness_frozen_at(contact, &model.geoms, (&a.now, &b.now), ws.frozen[c]);
+    let (pa, pb) = (a.body, b.body);
+    ws.prepared[c] = true;
+    ws.contact_phi_now[c] = w.phi;
+    // φ̇ = n · (velocity of A's witness − velocity of B's witness), n from B to A
+    let point_velocity = |b: usize, pose: &Pose, p: &Vector3<f64>| {
+        if b == 0 {
+            return Vector3::zeros();
+        }
+        let (v, wb) = state.velocity(b);
+        v + (crate::math::quat::rotation(&pose.quat) * wb).cross(&(p - pose.pos))
+    };
+    ws.contact_rate_now[c] = w.normal.dot(
+        &(point_velocity(ga.body, &pa, &w.point_a) - point_velocity(gb.body, &pb, &w.point_b)),
+    );
+    ws.contact_step[c] = StepRows::new(w, pa, pb);
+}
+
+/// Largest distance (m) from a body's centre of mass to any point of `geom` (infinite for a
+/// plane on a moving body).
+fn geom_reach(geom: &crate::contact::Geom) -> f64 {
+    geom.pos.norm() + bounding_radius(&geom.shape)
+}
+
+/// Radius of the smallest sphere about a shape's frame origin that holds it (infinite for a
+/// plane).
+fn bounding_radius(shape: &crate::contact::geometry::Shape) -> f64 {
+    use crate::contact::geometry::Shape;
+    match *shape {
+        Shape::Plane => f64::INFINITY,
+        Shape::Sphere { radius } => radius,
+        Shape::Capsule {
+            radius,
+            half_length,
+        } => radius + half_length,
+        Shape::Box { half_extents } => half_extents.norm(),
+        Shape::Cylinder {
+            radius,
+            half_length,
+        } => radius.hypot(half_length),
+        Shape::Ellipsoid { radii } => radii.max(),
+        Shape::Point => 0.0,
+    }
+}
+
+/// Add to the step the candidates within reach (after [`prepare`]): those whose current
+/// distance is within `margin + h (2 u + h |g|)` (the candidate's margin:
+/// [`candidate_margin`]), with the approach speed `u` as
+/// `reach` says. The step starts with [`Reach::Approach`], the rate at which the witness points
+/// close along the normal: measured 2026-12-02 (`step_bench`, seed 5, 300 steps), it keeps
+/// 11.6 of the A1's 1024 candidates active per step instead of 54.4 under [`Reach::Bound`]
+/// (1.3 of them carry an impulse), and the A1 step costs 39% fewer instructions. A step that
+/// closes a gap faster than this estimate (a swinging box corner, an impulsive actuator) is
+/// caught by [`missed_contacts`] and re-solved; a solve that fails is solved again with the
+/// candidates of [`Reach::Bound`], then with all of them.
+/// Joint and tendon limits are activated likewise ([`activate_limits`]). Returns how many
+/// candidates, limited joints and tendon limits it added.
+pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace, reach: Reach) -> usize {
+    let margin = model.options.activation_margin;
+    let before = ws.active_contacts();
+    if margin == f64::INFINITY || reach == Reach::All {
+        let nc = model.ncontact();
+        let limits = (0..model.njoint())
+            .filter(|&j| model.topology.limit_node[j].is_some() && !ws.active[nc + j])
+            .count()
+            + ws.tendon_active().iter().filter(|a| !**a).count();
+        ws.active.fill(true);
+        return nc - before + limits;
+    }
+    let limits = activate_limits(model, state, ws, reach);
+    let h = model.options.timestep;
+    let drift = h * h * model.options.gravity.norm();
+    for (c, contact) in model.contacts.iter().enumerate() {
+        let margin = candidate_margin(model, contact);
+        let speed = match reach {
+            Reach::All => unreachable!(),
+            Reach::Approach => (-ws.contact_rate_now[c]).max(0.0),
+            Reach::Bound => relative_speed(
+                state,
+                &model.geoms[contact.geom_a],
+                &model.geoms[contact.geom_b],
+            ),
+        };
+        let reach = margin + 2.0 * h * speed + drift;
+        // NaN distances or speeds stay active (the solve then reports them)
+        let phi = ws.contact_phi_now[c];
+        ws.active[c] |= phi.is_nan() || reach.is_nan() || phi <= reach;
+    }
+    ws.active_contacts() - before + limits
+}
+
+/// The activation margin of candidate `contact` ([`activate`], [`missed_contacts`]):
+/// `Options::activation_margin`, but at most the bounding radius of the pair's smaller geom
+/// (a point, of radius 0, does not count as the smaller).
+///
+/// An infinite margin (every candidate active) stays infinite.
+///
+/// Why: the margin is a buffer against the approach-rate estimate, in metres, sized for
+/// links; pairs with a small geom sat active at several times its size. The Panda's
+/// fingertip pads (boxes of bounding radius 4.7–5.0 mm) made 16 corner candidates per pad
+/// pair within the 1 cm margin whenever the fingers were less than 1 cm apart: 15.4–25.5 of
+/// its 835 candidates active per Table V step (`step_bench panda.xml 300 1 SEED`, seeds
+/// 9..12), about one with an impulse. Measured on the same states (`option_ab panda.xml 300
+/// SEED` with a temporary switch for the cap, applied in the activation only), seeds
+/// 9/10/11/12: 1738 → 1720, 1743 → 1772, 3876 → 3082, 2225 → 2129 iterations and
+/// 0.187 → 0.142, 0.266 → 0.249, 2.09 → 1.20, 0.37 → 0.21 s, every step converged, positions
+/// within 1e-5 m. The shared humanoid, A1 and X2 have no geom smaller than the margin: their
+/// steps are bit for bit the same.
+pub(crate) fn candidate_margin(model: &Model, contact: &crate::contact::Contact) -> f64 {
+    let margin = model.options.activation_margin;
+    if !margin.is_finite() {
+        return margin;
+    }
+    let size = |g: usize| match bounding_radius(&model.geoms[g].shape) {
+        r if r > 0.0 => r,
+        _ => f64::INFINITY,
+    };
+    margin.min(size(contact.geom_a).min(size(contact.geom_b)))
+}
+
+/// Reach of a joint limit's activation (rad or m) before the rate term: [`activate_limits`].
+const LIMIT_REACH: f64 = 0.1;
+
+/// Activate the limits of every joint with a limited coordinate within `max(activation_margin,
+/// LIMIT_REACH) + 4 h |θ̇|` of a bound at the step's start (θ̇ the joint's current rate); with
+/// [`Reach::Bound`], every limited joint. Tendon limits likewise, by their length `Σ coef q`
+/// and the rate bound `Σ |coef q̇|`. Records every limit's slacks at the step's start
+/// (`limit_slack_now`). Returns how many joints and tendon limits it added.
+///
+/// Why: a limit far from its bounds carries no impulse, but as a node of the Newton system it
+/// cost its assembly, factorisation and line-search evaluations in every iteration: on the
+/// shared A1 (12 limited hinges, 0.1 of them active per Table V step) an iteration costs 22%
+/// fewer instructions (callgrind, `step_bench a1.xml 60 1`: 688k → 535k, the same as the model
+/// without limits). The reach: with the activation margin (0.01) and `2 h |θ̇|`, 19 of the
+/// humanoid's 300 steps (seed 5) moved an inactive limit's coordinate to its bound and were
+/// solved again; with 0.1 and `4 h |θ̇|`, none. The mean complementarity still counts the
+/// inactive limits' pairs ([`super::inequality::mean_complementarity`]; left out, the
+/// humanoid took 21.11 instead of 19.65 iterations per step, counted 19.06). `step_bench`, 8 seeds × 300 steps:
+/// humanoid 19.65 → 19.06 iterations per step, A1 15.97 → 15.34, and 17% and 32% less time
+/// per step (BENCHMARKS.md, session 19). A step that moves a coordinate past this reach is
+/// caught by [`missed_limits`] and solved again.
+fn activate_limits(model: &Model, state: &State, ws: &mut Workspace, reach: Reach) -> usize {
+    let (margin, h) = (model.options.activation_margin, model.options.timestep);
+    // NaN coordinates or rates stay active (the solve then reports them)
+    let within_reach = |slack: [f64; 2], rate: f64| {
+        let within = margin.max(LIMIT_REACH) + 4.0 * h * rate;
+        !(slack[0] > within && slack[1] > within)
+    };
+    let nc = model.ncontact();
+    let mut added = 0;
+    for (j, joint) in model.joints.iter().enumerate() {
+        if model.topology.limit_node[j].is_none() {
+            continue;
+        }
+        let (q, qd) = joint_state(state, joint);
+        let mut near = reach == Reach::Bound;
+        for (i, &(dof, lo, hi)) in joint.limits.iter().enumerate() {
+            let slack = [q[dof] - lo, hi - q[dof]];
+            ws.limit_slack_now[ws.limit_adr[j] + i] = slack;
+            near |= within_reach(slack, qd[dof].abs());
+        }
+        if near && !ws.active[nc + j] {
+            ws.active[nc + j] = true;
+            added += 1;
+        }
+    }
+    // tendon limits: the length `L = Σ coef q` and a bound on its rate, `Σ |coef| |q̇|`
+    let (nl, nj) = (
+        ws.limit_slack_now.len() - model.tendon_limits.len(),
+        model.njoint(),
+    );
+    for (k, tendon) in model.tendon_limits.iter().enumerate() {
+        let (mut len, mut rate) = (0.0, 0.0);
+        for &(ji, dof, coef) in &tendon.terms {
+            let (q, qd) = joint_state(state, &model.joints[ji]);
+            len += coef * q[dof];
+            rate += (coef * qd[dof]).abs();
+        }
+        let (lo, hi) = tendon.range;
+        let slack = [len - lo, hi - len];
+        ws.limit_slack_now[nl + k] = slack;
+        let near = reach == Reach::Bound || within_reach(slack, rate);
+        if near && !ws.active[nc + nj + k] {
+            ws.active[nc + nj + k] = true;
+            added += 1;
+        }
+    }
+    added
+}
+
+/// Coordinates and rates of `joint` at `state`.
+fn joint_state(state: &State, joint: &crate::joints::Joint) -> ([f64; 7], [f64; 6]) {
+    use crate::joints::coordinates::{joint_qvel_in_frame, pose_of};
+    let frame = JointFrame::new(
+        joint,
+        &pose_of(state, joint.parent),
+        &pose_of(state, joint.child),
+    );
+    let (mut q, mut qd) = ([0.0; 7], [0.0; 6]);
+    frame.coordinates(joint, &mut q[..joint.nq()]);
+    joint_qvel_in_frame(state, joint, &frame, &mut qd[..joint.nfree()]);
+    (q, qd)
+}
+
+/// After a solve with some joint limits inactive: activate those of every joint with a limited
+/// coordinate within `activation_margin / 4` of a bound at the new configuration
+/// (`ws.next_pose`); returns how many joints were activated (the step must then be solved
+/// again).
+pub(crate) fn missed_limits(model: &Model, ws: &mut Workspace) -> usize {
+    let floor = 0.25 * model.options.activation_margin;
+    let nc = model.ncontact();
+    let mut n = 0;
+    for (j, joint) in model.joints.iter().enumerate() {
+        if model.topology.limit_node[j].is_none() || ws.active[nc + j] {
+            continue;
+        }
+        let pose = |b: usize| {
+            if b == 0 {
+                Pose::world()
+            } else {
+                ws.next_pose[b]
+            }
+        };
+        let frame = JointFrame::new(joint, &pose(joint.parent), &pose(joint.child));
+        let mut q = [0.0; 7];
+        frame.coordinates(joint, &mut q[..joint.nq()]);
+        let near = joint
+            .limits
+            .iter()
+            .any(|&(dof, lo, hi)| !(q[dof] - lo > floor && hi - q[dof] > floor));
+        if near {
+            ws.active[nc + j] = true;
+            n += 1;
+        }
+    }
+    let nj = model.njoint();
+    for k in 0..model.tendon_limits.len() {
+        if ws.active[nc + nj + k] {
+            continue;
+        }
+        let len = super::tendon::next_length(model, ws, k);
+        let (lo, hi) = model.tendon_limits[k].range;
+        if !(len - lo > floor && hi - len > floor) {
+            ws.active[nc + nj + k] = true;
+            n += 1;
+        }
+    }
+    n
+}
+
+/// How far ahead [`activate`] looks: the speed `u` in its reach `margin + h (2 u + h |g|)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Reach {
+    /// The rate at which the candidate's current witness points approach along its normal.
+    /// Two links swinging past each other, or a foot swinging above the floor, stay inactive.
+    Approach,
+    /// A bound on the speed of any point of one geom relative to the other's body
+    /// ([`relative_speed`]): covers every feature of the pair, at several times the cost.
+    Bound,
+    /// Every candidate.
+    All,
+}
+
+/// Bound on the speed of any point of one geom relative to the material of the other's body at
+/// the current velocities. With `a` the geom of finite reach `ρ` from its body's centre `c_a`
+/// (and not on the world), a point `p` of `a` moves relative to `b`'s body at
+/// `V + Ω × (p - c_a)`, `V = v_a - v_b - ω_b × (c_a - c_b)`, `Ω = ω_a - ω_b` (world frame), so
+/// at most `|V| + |Ω| ρ`: two links moving rigidly together have none.
+fn relative_speed(state: &State, ga: &crate::contact::Geom, gb: &crate::contact::Geom) -> f64 {
+    let swap = ga.body == 0 || (gb.body != 0 && geom_reach(gb) < geom_reach(ga));
+    let (a, b) = if swap { (gb, ga) } else { (ga, gb) };
+    let motion = |body: usize| {
+        if body == 0 {
+            (Vector3::zeros(), Vector3::zeros(), Vector3::zeros())
+        } else {
+            let pose = state.pose(body);
+            let (v, w) = state.velocity(body);
+            (pose.pos, v, crate::math::quat::rotation(&pose.quat) * w)
+        }
+    };
+    let ((ca, va, wa), (cb, vb, wb)) = (motion(a.body), motion(b.body));
+    let spin = (wa - wb).norm();
+    let turn = if spin > 0.0 {
+        spin * geom_reach(a)
+    } else {
+        0.0
+    };
+    (va - vb - wb.cross(&(ca - cb))).norm() + turn
+}
+
+/// After a solve with some candidates inactive: activate every inactive candidate whose
+/// distance at the new configuration (`ws.next_pose`) is below a quarter of its margin
+/// ([`candidate_margin`]);
+/// returns how many were activated (the step must then be solved again).
+pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
+    let mut n = 0;
+    let next = std::mem::take(&mut ws.next_pose);
+    let pose = |x: usize| if x == 0 { Pose::world() } else { next[x] };
+    for (g, geom) in model.geoms.iter().enumerate() {
+        ws.geom_bounds[g] = GeomBound::at(geom, &pose(geom.body));
+    }
+    for (c, contact) in model.contacts.iter().enumerate() {
+        if ws.active[c] {
+            continue;
+        }
+        let floor = 0.25 * candidate_margin(model, contact);
+        // far apart by the geoms' bounding spheres: no narrow phase (a frozen feature is
+        // measured against its own plane, which such a bound does not cover)
+        let (a, b) = (
+            &ws.geom_bounds[contact.geom_a],
+            &ws.geom_bounds[contact.geom_b],
+        );
+        if ws.frozen[c].is_none() && a.gap(b) > floor {
+            continue;
+        }
+        let wit = crate::contact::witness_frozen_at(
+            contact,
+            &model.geoms,
+            (&a.frame, &b.frame),
+            ws.frozen[c],
+        );
+        if wit.phi.is_nan() || wit.phi <= floor {
+            ws.active[c] = true;
+            n += 1;
+        }
+    }
+    ws.next_pose = next;
+    n
+}
+
+/// Penetration (m) of the exact disk rim that a solve with frozen rim points may leave before
+/// the rim points are re-frozen at the solved pose and the step solved again.
+const DISK_REFREEZE_TOL: f64 = 1e-10;
+
+/// After a solve: every frozen disk–plane candidate whose exact lowest rim point at the new
+/// configuration is below `-DISK_REFREEZE_TOL` is re-frozen at that point (the velocity change
+/// of the step moved the lowest point away from the predicted one); returns how many were (the
+/// step must then be solved again). The contact frames stay those prepared with the first
+/// freeze; the gradients linearise the step so (`prepare_candidate_holding`).
+pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
+    let mut n = 0;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        if !matches!(ws.frozen[c], Some(Frozen::Rim(_))) || !ws.active[c] {
+            continue;
+        }
+        let next = |x: usize| {
+            if x == 0 {
+                Pose::world()
+            } else {
+                ws.next_pose[x]
+            }
+        };
+        let (exact, pa, pb) = witness_frozen(contact, &model.geoms, next, None);
+        if exact.phi < -DISK_REFREEZE_TOL {
+            ws.frozen[c] = crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true)
+                .map(Frozen::Rim);
+            n += 1;
+        }
+    }
+    n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::geometry::Shape;
+    use crate::solver::inequality::tests::scene;
+    use crate::solver::test_rng::Rng;
+
+    #[test]
+    fn bounding_spheres_never_exceed_the_distance() {
+        // every shape against the floor and the others it collides with, random poses: the
+        // bound that lets `prepare` and `missed_contacts` skip the narrow phase must be at most
+        // the signed distance (cylinders and ellipsoids collide with planes only)
+        let sphere = Shape::Sphere { radius: 0.1 };
+        let capsule = Shape::Capsule {
+            radius: 0.05,
+            half_length: 0.2,
+        };
+        let cuboid = Shape::Box {
+            half_extents: Vector3::new(0.1, 0.2, 0.05),
+        };
+        let cylinder = Shape::Cylinder {
+            radius: 0.1,
+            half_length: 0.15,
+        };
+        let ellipsoid = Shape::Ellipsoid {
+            radii: Vector3::new(0.1, 0.05, 0.2),
+        };
+        let scenes = [
+            vec![sphere, capsule, cuboid],
+            vec![cylinder],
+            vec![ellipsoid],
+        ];
+        let mut rng = Rng(7);
+        let mut informative = 0;
+        for shapes in &scenes {
+            let model = scene(shapes);
+            let mut state = crate::State::reference(&model);
+            for _ in 0..200 {
+                for body in 1..model.nbody() {
+                    let (w, x, y, z) = (rng.next(), rng.next(), rng.next(), rng.next());
+                    let quat = nalgebra::Quaternion::new(w, x, y, z).normalize();
+                    let pos = Vector3::new(rng.next(), rng.next(), 0.5 * rng.next() + 0.3) * 0.6;
+                    state.set_pose(body, &Pose { pos, quat });
+                }
+                let exact = crate::contact::signed_distances(&model, &state);
+                let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
+                for (c, contact) in model.contacts.iter().enumerate() {
+                    let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
+                    let a = GeomBound::at(ga, &pose(ga.body));
+                    let gap = a.gap(&GeomBound::at(gb, &pose(gb.body)));
+                    assert!(
+                        gap <= exact[c] + 1e-12,
+                        "candidate {c}: bound {gap} > distance {}",
+                        exact[c]
+                    );
+                    informative += usize::from(gap > 0.0);
+                }
+            }
+        }
+        assert!(
+            informative > 1000,
+            "a bound that never culls ({informative} positive)"
+        );
+    }
+
+    #[test]
+    fn a_small_geom_caps_its_candidates_margin() {
+        // the floor, a 3 mm box, a point and a 20 cm sphere: every candidate with the box is
+        // capped at its bounding radius, whatever the other geom; the point does not count as
+        // small; an infinite margin (every candidate active) stays infinite
+        let half = Vector3::new(0.003, 0.002, 0.003);
+        let shapes = [
+            Shape::Box { half_extents: half },
+            Shape::Point,
+            Shape::Sphere { radius: 0.2 },
+        ];
+        let model = scene(&shapes);
+        let name = |g: usize| model.geoms[g].name.as_str();
+        let mut seen = 0;
+        for margin in [0.01, f64::INFINITY] {
+            let mut o = model.options.clone();
+            o.activation_margin = margin;
+            let m = model.with_options(o).unwrap();
+            for contact in &m.contacts {
+                let pair = [name(contact.geom_a), name(contact.geom_b)];
+                let expected = if !margin.is_finite() {
+                    margin
+                } else if pair.contains(&"g0") {
+                    half.norm()
+                } else {
+                    margin
+                };
+                assert_eq!(candidate_margin(&m, contact), expected, "{pair:?}");
+                seen += usize::from(pair.contains(&"g0") && pair.contains(&"floor"));
+            }
+        }
+        assert!(seen > 0, "no box-floor candidate in the scene");
+        assert!(half.norm() < 0.01);
+    }
+}
