@@ -52,14 +52,14 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
             posed = true;
         }
         let [a, b] = [contact.geom_a, contact.geom_b].map(|g| &poses[g]);
-        prepare_candidate_at(model, state, ws, c, (a, b), &mut memo);
+        prepare_candidate_at(model, ws, c, (a, b), &mut memo);
     }
     ws.geom_poses = poses;
 }
 
-/// A geom's body pose and its world poses at the body's current pose and one step ahead at
-/// its current velocities ([`predicted_pose`]): what preparing a candidate reads, computed
-/// once per [`prepare`] pass rather than for each candidate. Measured 2026-12-03
+/// A geom's body pose and velocity and its world poses at the body's current pose and one step
+/// ahead at its current velocities ([`predicted_pose`]): what preparing a candidate reads,
+/// computed once per [`prepare`] pass rather than for each candidate. Measured 2026-12-03
 /// (callgrind, `gradient_phases panda.xml 100 none coloured`): preparing the 368 of the
 /// Panda's 835 candidates near enough per step was 12.9% of its instructions, the world
 /// poses, predicted poses and state reads in it about half of that (its 400 finger-pad
@@ -67,6 +67,8 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct GeomPoses {
     body: Pose,
+    /// The body's COM velocity and angular velocity, world frame (zero for the world).
+    velocity: (Vector3<f64>, Vector3<f64>),
     now: GeomPose,
     ahead: GeomPose,
 }
@@ -75,6 +77,7 @@ impl Default for GeomPoses {
     fn default() -> Self {
         Self {
             body: Pose::world(),
+            velocity: (Vector3::zeros(), Vector3::zeros()),
             now: GeomPose::default(),
             ahead: GeomPose::default(),
         }
@@ -82,13 +85,25 @@ impl Default for GeomPoses {
 }
 
 impl GeomPoses {
-    /// The poses of geom `geom` at `state`.
-    fn of(model: &Model, state: &State, geom: &crate::contact::Geom) -> Self {
+    /// The poses of geom `geom` at `state`, its current world pose `now` if known.
+    fn of(
+        model: &Model,
+        state: &State,
+        geom: &crate::contact::Geom,
+        now: Option<GeomPose>,
+    ) -> Self {
         let h = model.options.timestep;
         let body = body_pose(state, geom.body);
+        let velocity = if geom.body == 0 {
+            (Vector3::zeros(), Vector3::zeros())
+        } else {
+            let (v, w) = state.velocity(geom.body);
+            (v, crate::math::quat::rotation(&body.quat) * w)
+        };
         Self {
             body,
-            now: geom.world_pose(&body),
+            velocity,
+            now: now.unwrap_or_else(|| geom.world_pose(&body)),
             ahead: geom.world_pose(&predicted_pose(state, geom.body, h)),
         }
     }
@@ -96,14 +111,15 @@ impl GeomPoses {
     /// The poses of every geom at `state`, the current world poses taken from `bounds` (the
     /// geoms' bounds at `state`).
     fn fill(model: &Model, state: &State, bounds: &[GeomBound], out: &mut [GeomPoses]) {
-        let h = model.options.timestep;
         for (g, geom) in model.geoms.iter().enumerate() {
-            out[g] = Self {
-                body: body_pose(state, geom.body),
-                now: bounds[g].frame,
-                ahead: geom.world_pose(&predicted_pose(state, geom.body, h)),
-            };
+            out[g] = Self::of(model, state, geom, Some(bounds[g].frame));
         }
+    }
+
+    /// Velocity of the material point at `p` (world) of the geom's body.
+    fn point_velocity(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        let (v, w) = self.velocity;
+        v + w.cross(&(p - self.body.pos))
     }
 }
 
@@ -210,22 +226,20 @@ fn prepare_candidate_with(
     memo: &mut crate::contact::BoxPairMemo,
 ) {
     let contact = &model.contacts[c];
-    let [a, b] =
-        [contact.geom_a, contact.geom_b].map(|g| GeomPoses::of(model, state, &model.geoms[g]));
-    prepare_candidate_at(model, state, ws, c, (&a, &b), memo);
+    let [a, b] = [contact.geom_a, contact.geom_b]
+        .map(|g| GeomPoses::of(model, state, &model.geoms[g], None));
+    prepare_candidate_at(model, ws, c, (&a, &b), memo);
 }
 
-/// [`prepare_candidate_with`] with the poses of the candidate's geoms.
+/// [`prepare_candidate_with`] with the poses and velocities of the candidate's geoms.
 fn prepare_candidate_at(
     model: &Model,
-    state: &State,
     ws: &mut Workspace,
     c: usize,
     (a, b): (&GeomPoses, &GeomPoses),
     memo: &mut crate::contact::BoxPairMemo,
 ) {
     let contact = &model.contacts[c];
-    let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
     ws.frozen[c] = crate::contact::freeze_for_step_at(
         contact,
         &model.geoms,
@@ -235,21 +249,13 @@ fn prepare_candidate_at(
     );
     let w =
         crate::contact::witness_frozen_at(contact, &model.geoms, (&a.now, &b.now), ws.frozen[c]);
-    let (pa, pb) = (a.body, b.body);
     ws.prepared[c] = true;
     ws.contact_phi_now[c] = w.phi;
     // φ̇ = n · (velocity of A's witness − velocity of B's witness), n from B to A
-    let point_velocity = |b: usize, pose: &Pose, p: &Vector3<f64>| {
-        if b == 0 {
-            return Vector3::zeros();
-        }
-        let (v, wb) = state.velocity(b);
-        v + (crate::math::quat::rotation(&pose.quat) * wb).cross(&(p - pose.pos))
-    };
-    ws.contact_rate_now[c] = w.normal.dot(
-        &(point_velocity(ga.body, &pa, &w.point_a) - point_velocity(gb.body, &pb, &w.point_b)),
-    );
-    ws.contact_step[c] = StepRows::new(w, pa, pb);
+    ws.contact_rate_now[c] = w
+        .normal
+        .dot(&(a.point_velocity(&w.point_a) - b.point_velocity(&w.point_b)));
+    ws.contact_step[c] = StepRows::new(w, a.body, b.body);
 }
 
 /// Largest distance (m) from a body's centre of mass to any point of `geom` (infinite for a
