@@ -10,6 +10,7 @@ its reference figures) on the same MJCF file, in the same run, each timing the m
     .venv/bin/python examples/benchmarks/table5.py --kappa-grad 1e-4   # smoothed gradients
     .venv/bin/python examples/benchmarks/table5.py --tol 1e-6   # looser solver (Dojo.jl's rtol)
     .venv/bin/python examples/benchmarks/table5.py --threads 1   # rollouts on one thread
+    .venv/bin/python examples/benchmarks/table5.py --seed 3   # other random controls
 
 `ukemi.rollout_jacobians` (the A,B workload in one call) and the rollout VJP linearise their
 steps on the other threads while their forward pass runs (rayon's default: one thread per core;
@@ -124,6 +125,8 @@ def main():
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--repeats", type=int, default=1, help="timings are the mean of this many runs")
     ap.add_argument("--only", default="", help="run models whose name contains this")
+    ap.add_argument("--seed", type=int, default=0,
+                    help="seed of the random controls (the models run draw from it in turn)")
     ap.add_argument("--kappa-grad", type=float, default=None,
                     help="central-path parameter of the gradients (default: exact, None)")
     ap.add_argument("--tol", type=float, default=None,
@@ -135,7 +138,7 @@ def main():
     ukemi.set_num_threads(args.threads)
     kappa = args.kappa_grad
     mean = lambda f: [sum(x) / args.repeats for x in zip(*(f() for _ in range(args.repeats)))]
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(args.seed)
     print(f"{'model':24s} {'nv':>4s} {'nu':>3s} | {'ukemi fwd':>10s} {'mj fwd':>9s} | "
           f"{'ukemi A,B':>10s} {'mj FD':>9s} {'ratio':>6s} {'grad ovh':>9s} | "
           f"{'rollout A,B':>11s} {'/mj FD':>7s} | {'rollout VJP':>11s} {'/mj FD':>7s}")
