@@ -123,6 +123,11 @@ impl GeomPoses {
     }
 }
 
+/// The pose of body `b` in a step's solved next poses `next` (the world frame for body 0).
+fn next_pose(next: &[Pose], b: usize) -> Pose {
+    if b == 0 { Pose::world() } else { next[b] }
+}
+
 /// The pose of body `b` at `state` (the world frame for body 0).
 fn body_pose(state: &State, b: usize) -> Pose {
     if b == 0 { Pose::world() } else { state.pose(b) }
@@ -456,13 +461,7 @@ pub(crate) fn missed_limits(model: &Model, ws: &mut Workspace) -> usize {
         if model.topology.limit_node[j].is_none() || ws.active[nc + j] {
             continue;
         }
-        let pose = |b: usize| {
-            if b == 0 {
-                Pose::world()
-            } else {
-                ws.next_pose[b]
-            }
-        };
+        let pose = |b: usize| next_pose(&ws.next_pose, b);
         let frame = JointFrame::new(joint, &pose(joint.parent), &pose(joint.child));
         let mut q = [0.0; 7];
         frame.coordinates(joint, &mut q[..joint.nq()]);
@@ -537,9 +536,8 @@ fn relative_speed(state: &State, ga: &crate::contact::Geom, gb: &crate::contact:
 pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
     let mut n = 0;
     let next = std::mem::take(&mut ws.next_pose);
-    let pose = |x: usize| if x == 0 { Pose::world() } else { next[x] };
     for (g, geom) in model.geoms.iter().enumerate() {
-        ws.geom_bounds[g] = GeomBound::at(geom, &pose(geom.body));
+        ws.geom_bounds[g] = GeomBound::at(geom, &next_pose(&next, geom.body));
     }
     for (c, contact) in model.contacts.iter().enumerate() {
         if ws.active[c] {
@@ -585,13 +583,7 @@ pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
         if !matches!(ws.frozen[c], Some(Frozen::Rim(_))) || !ws.active[c] {
             continue;
         }
-        let next = |x: usize| {
-            if x == 0 {
-                Pose::world()
-            } else {
-                ws.next_pose[x]
-            }
-        };
+        let next = |x: usize| next_pose(&ws.next_pose, x);
         let (exact, pa, pb) = witness_frozen(contact, &model.geoms, next, None);
         if exact.phi < -DISK_REFREEZE_TOL {
             ws.frozen[c] = crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true)
@@ -647,7 +639,7 @@ mod tests {
                     state.set_pose(body, &Pose { pos, quat });
                 }
                 let exact = crate::contact::signed_distances(&model, &state);
-                let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
+                let pose = |b: usize| body_pose(&state, b);
                 for (c, contact) in model.contacts.iter().enumerate() {
                     let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
                     let a = GeomBound::at(ga, &pose(ga.body));
