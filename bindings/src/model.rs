@@ -511,7 +511,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, cone_gap=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -525,6 +525,7 @@ impl PyModel {
         endgame_iter: Option<i64>,
         acceptable_iter: Option<i64>,
         cone_gap: Option<Bound<'_, PyAny>>,
+        drop_redundant_friction: Option<Bound<'_, PyAny>>,
         max_ls: Option<i64>,
         undercut: Option<f64>,
         warm_start: Option<Bound<'_, PyAny>>,
@@ -570,6 +571,11 @@ impl PyModel {
             o.endgame_iter = count("endgame_iter", endgame_iter, o.endgame_iter)?;
             o.acceptable_iter = count("acceptable_iter", acceptable_iter, o.acceptable_iter)?;
             o.cone_gap = flag("cone_gap", cone_gap, o.cone_gap)?;
+            o.drop_redundant_friction = flag(
+                "drop_redundant_friction",
+                drop_redundant_friction,
+                o.drop_redundant_friction,
+            )?;
             o.max_ls = count("max_ls", max_ls, o.max_ls)?;
             o.regularization = regularization.unwrap_or(o.regularization);
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);

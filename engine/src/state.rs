@@ -441,10 +441,10 @@ pub struct Workspace {
     /// Per limited dof (`limit_adr`), then per tendon limit: its slacks `(q - lo, hi - q)` at
     /// the step's start, what an inactive limit keeps in its slack variables.
     pub(crate) limit_slack_now: Vec<[f64; 2]>,
-    /// Per candidate: the unit direction (contact tangent frame) along which its friction is
-    /// held on the cone's boundary after the interior-point solve (see
-    /// `solver::saturation`); `None` for complementarity rows.
-    pub(crate) saturated: Vec<Option<[f64; 2]>>,
+    /// Per candidate: how its friction cone is held out of the interior-point iteration — on
+    /// the cone's boundary after the solve, or at zero for a pair that cannot slip (see
+    /// `solver::saturation::Hold`); `None` for complementarity rows.
+    pub(crate) saturated: Vec<Option<crate::solver::saturation::Hold>>,
     /// Per contact candidate, then per joint: whether its complementarity pairs block the
     /// interior-point direction (`solver::central::unblock`'s scratch).
     pub(crate) blocking: Vec<bool>,
@@ -647,10 +647,23 @@ impl Workspace {
         &self.active[self.saturated.len() + self.limit_adr.len()..]
     }
 
+    /// Active contacts whose friction the last step held at zero: pairs that can only slide
+    /// along the contact normal (`Options::drop_redundant_friction`).
+    pub fn frictionless_contacts(&self) -> usize {
+        self.saturated
+            .iter()
+            .zip(&self.active)
+            .filter(|&(s, &a)| a && *s == Some(crate::solver::saturation::Hold::Frictionless))
+            .count()
+    }
+
     /// Contacts whose friction the last step held on its cone's boundary, saturated and
     /// nearly still (the κ = 0 polish of `solver::saturation`).
     pub fn saturated_contacts(&self) -> usize {
-        self.saturated.iter().filter(|s| s.is_some()).count()
+        self.saturated
+            .iter()
+            .filter(|s| matches!(s, Some(crate::solver::saturation::Hold::Sliding(_))))
+            .count()
     }
 
     /// Per candidate, whether it took part in the last step (see [`Self::active_contacts`]).

@@ -18,6 +18,7 @@
 //! restitution), as in the paper.
 pub mod cone;
 pub mod geometry;
+pub mod slide_pair;
 pub mod slip;
 pub mod wrench;
 
@@ -122,6 +123,30 @@ pub struct Contact {
     pub model: ContactModel,
     /// Friction coefficient of the pair (max of the two geoms, as MuJoCo).
     pub friction: f64,
+    /// When the two geoms' bodies can only slide along one axis relative to each other (a
+    /// parallel gripper's fingers, [`slide_pair`]): that axis in geom a's and geom b's frames.
+    /// A candidate whose normal is this axis cannot slip, and the solver holds its friction at
+    /// zero.
+    pub slide_axes: Option<[Vector3<f64>; 2]>,
+}
+
+impl Contact {
+    /// Whether this candidate, with its feature frozen for the step as `frozen`, has its normal
+    /// along the pair's slide axis, so that its two sides cannot slip (see [`slide_pair`]):
+    /// a box corner measured against the face of a box that faces along the axis. Other
+    /// features' normals turn as the pair slides, and keep their friction.
+    pub fn cannot_slip(&self, frozen: Option<Frozen>) -> bool {
+        let (Some(axes), Some(Frozen::Face { axis, .. })) = (self.slide_axes, frozen) else {
+            return false;
+        };
+        // the measuring box: B for a corner of A (or a ball) on B, A for a ball of B on A
+        let along = match self.feature {
+            Feature::SphereBox { .. } => axes[1][axis],
+            Feature::BoxSphere { .. } => axes[0][axis],
+            _ => return false,
+        };
+        along.abs() >= 1.0 - 1e-12
+    }
 }
 
 impl Contact {

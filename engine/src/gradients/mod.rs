@@ -275,7 +275,7 @@ struct Solved {
 pub(crate) struct StoredSolution {
     w: Vec<f64>,
     active: Vec<bool>,
-    saturated: Vec<Option<[f64; 2]>>,
+    saturated: Vec<Option<crate::solver::saturation::Hold>>,
     /// The features the active candidates held for the step (`Workspace::frozen`), which a
     /// re-freeze after the solve may have moved from those the state's prediction chooses.
     frozen: Vec<(usize, Option<Frozen>)>,

@@ -576,12 +576,18 @@ impl ModelBuilder {
                         ))
                     })?;
                 let (a, b) = if swapped { (j, i) } else { (i, j) };
+                let slide_axes =
+                    crate::contact::slide_pair::slide_axis(joints, geoms[a].body, geoms[b].body)
+                        .map(|[ax, bx]| {
+                            [geoms[a].rot.transpose() * ax, geoms[b].rot.transpose() * bx]
+                        });
                 out.extend(features.into_iter().map(|feature| Contact {
                     geom_a: a,
                     geom_b: b,
                     feature,
                     model,
                     friction,
+                    slide_axes,
                 }));
             }
         }

@@ -63,6 +63,12 @@ pub struct Options {
     /// humanoid 0.3-2.4% fewer; Panda seed 11 3581 → 3756. A sliding box's friction opposes
     /// its slip to 1e-8 either way (`tests/test_contact.py`).
     pub cone_gap: bool,
+    /// Hold at zero the friction of a contact between two bodies that can only slide along the
+    /// contact normal relative to each other (a parallel gripper's finger pads pressed
+    /// together, [`crate::contact::slide_pair`]). Default true. Such a contact cannot slip: its
+    /// friction only trades places with the joints' reactions and never changes the motion,
+    /// but it leaves the solve a family of solutions, which jammed the Panda's solves.
+    pub drop_redundant_friction: bool,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
     /// Start contact and limit variables from the previous step's solution (pushed
@@ -162,6 +168,7 @@ impl Default for Options {
             acceptable_kappa_tol: 1e-8,
             acceptable_iter: 15,
             cone_gap: true,
+            drop_redundant_friction: true,
             undercut: 10.0,
             warm_start: true,
             warm_start_margin: 1e-6,

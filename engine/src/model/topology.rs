@@ -9,7 +9,7 @@
 //! tendon limits along the tree paths between their bodies.
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::contact::{Contact, Geom};
+use crate::contact::{Contact, ContactModel, Geom};
 use crate::joints::Joint;
 use crate::joints::coupling::Coupling;
 use crate::joints::tendon::TendonLimit;
@@ -76,6 +76,9 @@ pub(crate) struct Topology {
     pub cone_degree: usize,
     /// Rows of bodies, joints and couplings (the inequality nodes follow them).
     pub smooth_dim: usize,
+    /// The friction-cone candidates between bodies that can only slide along one axis relative
+    /// to each other (`Contact::slide_axes`): those whose friction a step may hold at zero.
+    pub slide_candidates: Vec<usize>,
 }
 
 /// Graph node of a moving body.
@@ -286,6 +289,12 @@ impl Topology {
             contact_blocks,
             contact_bodies,
             smooth_dim,
+            slide_candidates: contacts
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.slide_axes.is_some() && c.model == ContactModel::Nonlinear)
+                .map(|(i, _)| i)
+                .collect(),
         })
     }
 }

@@ -65,9 +65,11 @@ pub(crate) fn solve(
     start: Start,
 ) -> StepReport {
     ws.active.fill(true);
-    ws.saturated.fill(None);
+    super::saturation::release_sliding(ws);
     match start {
         Start::Hard => {
+            super::activation::ensure_prepared(model, state, ws);
+            super::saturation::hold_frictionless(model, ws);
             centre(model, state, ws, kappa);
             follow(model, state, ws, kappa)
         }
@@ -128,7 +130,7 @@ fn follow(model: &Model, state: &State, ws: &mut Workspace, kappa: f64) -> StepR
         ws.matrix
             .solve_refined(p, &mut ws.delta_aff, ipm::REFINE_ROUNDS, ipm::REFINE_ENOUGH);
         ipm::load_residual(model, &ws.active, &ws.residual, &mut ws.delta, 1.0);
-        add_mehrotra_correction(model, &ws.active, &ws.nt, &ws.delta_aff, &mut ws.delta);
+        add_mehrotra_correction(model, ws);
         ipm::solve_negated(model, ws, p);
         let worst = Violation { r: centred, k: 0.0 };
         let mut taus = ipm::fractions_to_boundary(model, worst);

@@ -13,6 +13,7 @@
 //! ```
 use nalgebra::{Matrix3, Vector3};
 
+use super::saturation::Hold;
 use crate::contact::cone::{NtScaling, arrow, orthant_step, soc_product, soc_step};
 use crate::contact::{ContactFrame, ContactModel, witness_frozen};
 use crate::joints::geometry::{JointFrame, Pose};
@@ -58,7 +59,7 @@ pub(crate) fn for_each_pair(
 pub(crate) fn for_each_pair_except(
     model: &Model,
     active: &[bool],
-    saturated: &[Option<[f64; 2]>],
+    saturated: &[Option<Hold>],
     mut f: impl FnMut(usize, usize, usize, usize, bool),
 ) {
     for_each_owned_pair(model, active, saturated, |_, o, p, d, r, soc| {
@@ -71,7 +72,7 @@ pub(crate) fn for_each_pair_except(
 pub(crate) fn for_each_owned_pair(
     model: &Model,
     active: &[bool],
-    saturated: &[Option<[f64; 2]>],
+    saturated: &[Option<Hold>],
     mut f: impl FnMut(Option<usize>, usize, usize, usize, usize, bool),
 ) {
     let t = &model.topology;
@@ -203,6 +204,7 @@ pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm:
     }
     // other node entries (the ψ-slack pairs are covered above; nothing else is free)
     slip_at_start(model, state, ws, margin, warm);
+    super::saturation::hold_frictionless(model, ws);
 }
 
 /// Start the slip member `η` of the active friction cones at the tangential slip of the initial
@@ -403,13 +405,14 @@ fn contact_rows(
             r[2] = xi[0] - mu * x[0];
             match ws.saturated[c] {
                 None => r[3..6].copy_from_slice(soc_product(&xi, &eta).as_slice()),
-                Some(held) => {
+                Some(Hold::Sliding(held)) => {
                     // friction on the cone's boundary along d, η₁ the slip speed along -d
                     let (d, _) = super::saturation::direction(held, [eta[1], eta[2]]);
                     r[3] = eta[0] + d[0] * eta[1] + d[1] * eta[2];
                     r[4] = xi[1] - xi[0] * d[0];
                     r[5] = xi[2] - xi[0] * d[1];
                 }
+                Some(Hold::Frictionless) => r[3..6].copy_from_slice(&[eta[0], xi[1], xi[2]]),
             }
             r[6] = eta[1] - vt(1);
             r[7] = eta[2] - vt(2);
@@ -448,7 +451,7 @@ fn contact_rows(
 fn violations(
     model: &Model,
     active: &[bool],
-    saturated: &[Option<[f64; 2]>],
+    saturated: &[Option<Hold>],
     w: &[f64],
     residual: &mut [f64],
     kappa: f64,
@@ -623,7 +626,7 @@ fn contact_diag(
     mu: f64,
     x: &[f64],
     nt: Option<&NtScaling>,
-    saturated: Option<[f64; 2]>,
+    saturated: Option<Hold>,
     d: &mut [f64],
 ) {
     let dim = model.dim();
@@ -652,7 +655,17 @@ fn contact_diag(
                 set(4 + i, 6 + i, x[2]);
                 set(6 + i, 6 + i, 1.0); // η₂:₃ - v_t
             }
-            if let Some(held) = saturated {
+            if saturated == Some(Hold::Frictionless) {
+                // η₁ and ξ₂:₃
+                for r in 3..6 {
+                    for k in 2..8 {
+                        set(r, k, 0.0);
+                    }
+                }
+                set(3, 5, 1.0);
+                set(4, 3, 1.0);
+                set(5, 4, 1.0);
+            } else if let Some(Hold::Sliding(held)) = saturated {
                 // η₁ + d·η₂:₃ and ξ₂:₃ - ξ₁ d, with d = -η̂₂:₃ turning with a sliding slip:
                 // ∂(ξ₁ d)/∂η₂:₃ = -ξ₁ (I - ddᵀ) / |η₂:₃|
                 let (dir, turn) = super::saturation::direction(held, [x[6], x[7]]);
@@ -747,7 +760,7 @@ fn assemble_limits(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
 pub(crate) fn cone_search(
     model: &Model,
     active: &[bool],
-    saturated: &[Option<[f64; 2]>],
+    saturated: &[Option<Hold>],
     w: &[f64],
     delta: &[f64],
     tau_ort: f64,
@@ -808,7 +821,7 @@ pub(crate) fn update_scalings(model: &Model, ws: &mut Workspace) {
     let t = &model.topology;
     for c in active_candidates(&ws.active[..model.ncontact()]) {
         ws.nt[c] = None;
-        if model.contacts[c].model == ContactModel::Nonlinear {
+        if model.contacts[c].model == ContactModel::Nonlinear && ws.saturated[c].is_none() {
             let o = t.pattern.offset(t.contact_node[c]);
             ws.nt[c] = NtScaling::new(&v3(&ws.w, o + SOC.0), &v3(&ws.w, o + SOC.1));
         }
@@ -838,13 +851,9 @@ pub(crate) fn scale_soc_rows(model: &Model, ws: &mut Workspace, trial: bool, kap
 
 /// Mehrotra's second-order term: add `Δb_aff ∘ Δc_aff` to the complementarity rows (in the
 /// scaled variables `WΔξ`, `W⁻¹Δη` for a friction cone with a scaling in `nt`).
-pub(crate) fn add_mehrotra_correction(
-    model: &Model,
-    active: &[bool],
-    nt: &[Option<NtScaling>],
-    delta_aff: &[f64],
-    residual: &mut [f64],
-) {
+pub(crate) fn add_mehrotra_correction(model: &Model, ws: &mut Workspace) {
+    let (active, nt, delta_aff) = (&ws.active, &ws.nt, &ws.delta_aff);
+    let residual = &mut ws.delta;
     for_each_pair(model, active, |o, p, d, row, soc| {
         if !soc {
             residual[o + row] += delta_aff[o + p] * delta_aff[o + d];
@@ -852,7 +861,8 @@ pub(crate) fn add_mehrotra_correction(
     });
     let t = &model.topology;
     for c in active_candidates(&active[..model.ncontact().min(active.len())]) {
-        if model.contacts[c].model != ContactModel::Nonlinear {
+        // (a held cone's rows are equalities)
+        if model.contacts[c].model != ContactModel::Nonlinear || ws.saturated[c].is_some() {
             continue;
         }
         let o = t.pattern.offset(t.contact_node[c]);
@@ -876,7 +886,7 @@ pub(crate) fn store(model: &Model, state: &mut State, ws: &Workspace) {
     for (c, &n) in t.contact_node.iter().enumerate() {
         let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
         let x = &mut state.ineq_vars[k..k + dim];
-        if ws.active[c] && ws.saturated[c].is_some() {
+        if ws.active[c] && matches!(ws.saturated[c], Some(Hold::Sliding(_))) {
             // a friction cone held saturated by the polish: its friction impulse is kept at the
             // interior-point value (within the solver tolerance of the held one): the next
             // step's warm start from a point on the cone's boundary cost the 14-sphere pyramid

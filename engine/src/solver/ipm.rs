@@ -214,7 +214,7 @@ pub(crate) fn solve_to(
         scale_soc_rows(model, ws, false, kappa);
         let merit = live_norm2(model, &ws.active, &ws.residual);
         load_residual(model, &ws.active, &ws.residual, &mut ws.delta, 1.0);
-        add_mehrotra_correction(model, &ws.active, &ws.nt, &ws.delta_aff, &mut ws.delta);
+        add_mehrotra_correction(model, ws);
         solve_negated(model, ws, p);
         let taus = fractions_to_boundary(model, vio);
         let mut corrector = true;

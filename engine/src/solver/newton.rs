@@ -805,7 +805,7 @@ fn restart_warm(model: &Model, state: &State, ws: &mut Workspace) {
 fn at_neutral_point(model: &Model, ws: &Workspace) -> bool {
     let w = &ws.w;
     let mut neutral = true;
-    super::inequality::for_each_pair(model, &ws.active, |o, p, d, _, soc| {
+    super::inequality::for_each_pair_except(model, &ws.active, &ws.saturated, |o, p, d, _, soc| {
         neutral &= if soc {
             [o + p, o + d]
                 .iter()
@@ -1241,7 +1241,7 @@ mod tests {
             .expect("a friction cone");
         for case in 0..6 {
             if case == 3 {
-                ws.saturated[cone] = Some([0.6, 0.8]);
+                ws.saturated[cone] = Some(super::super::saturation::Hold::Sliding([0.6, 0.8]));
             }
             evaluate_kept(&model, &state, &mut ws, false, 0.0);
             match case % 3 {

@@ -55,6 +55,53 @@ const SLIP_FLOOR: f64 = 1e-6;
 /// suffice where the polish is right.
 const MAX_ITER: usize = 6;
 
+/// A friction cone taken out of the interior-point iteration, its complementarity rows
+/// `ξ ∘ η = κe` replaced by equalities.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Hold {
+    /// Saturated friction on the cone's boundary, against the slip or along this unit
+    /// direction (contact tangent frame) below [`SLIP_FLOOR`]: `ξ₂:₃ = ξ₁ d`, `η₁ = -d · η₂:₃`
+    /// (the polish and the rescue, see the module docs).
+    Sliding([f64; 2]),
+    /// No friction, `ξ₂:₃ = 0` and `η₁ = 0`: a contact between bodies that can only slide
+    /// along its normal relative to each other, which cannot slip
+    /// ([`crate::contact::slide_pair`]). Held for the whole step, and in the gradients'
+    /// central-path solves.
+    Frictionless,
+}
+
+/// Hold the friction of every active candidate that cannot slip at zero ([`Hold::Frictionless`],
+/// setting `ξ₂:₃ = η₁ = 0` in the iterate), and release any such hold of a candidate that can
+/// slip again (its feature changed). Called whenever a solve starts its iterate.
+pub(crate) fn hold_frictionless(model: &Model, ws: &mut Workspace) {
+    let t = &model.topology;
+    let drop = model.options.drop_redundant_friction;
+    for &c in &t.slide_candidates {
+        let contact = &model.contacts[c];
+        let held = drop && ws.active[c] && contact.cannot_slip(ws.frozen[c]);
+        match (held, ws.saturated[c]) {
+            (true, _) => {
+                ws.saturated[c] = Some(Hold::Frictionless);
+                let o = t.pattern.offset(t.contact_node[c]);
+                ws.w[o + SOC.0 + 1] = 0.0;
+                ws.w[o + SOC.0 + 2] = 0.0;
+                ws.w[o + SOC.1] = 0.0;
+            }
+            (false, Some(Hold::Frictionless)) => ws.saturated[c] = None,
+            (false, _) => {}
+        }
+    }
+}
+
+/// Release the sliding holds, keeping the frictionless ones.
+pub(crate) fn release_sliding(ws: &mut Workspace) {
+    for held in &mut ws.saturated {
+        if matches!(held, Some(Hold::Sliding(_))) {
+            *held = None;
+        }
+    }
+}
+
 /// Polish the converged solution in `ws` (see the module docs); returns the iterations spent.
 /// On return `ws.saturated` marks the contacts held on their cone's boundary (none when the
 /// polish was not needed or not kept).
@@ -124,7 +171,7 @@ fn hold(model: &Model, state: &State, ws: &mut Workspace, slip_max: f64) -> (usi
     let kept = converged && consistent(model, ws);
     if !kept {
         std::mem::swap(&mut ws.w, &mut ws.w_acceptable);
-        ws.saturated.fill(None);
+        release_sliding(ws);
         // the derived quantities (next poses, residual) of the restored solution
         evaluate(model, state, ws, false, 0.0);
     }
@@ -136,6 +183,9 @@ fn select(model: &Model, ws: &mut Workspace, slip_max: f64) -> bool {
     let t = &model.topology;
     let mut any = false;
     for (c, contact) in model.contacts.iter().enumerate() {
+        if ws.saturated[c] == Some(Hold::Frictionless) {
+            continue;
+        }
         ws.saturated[c] = None;
         if !ws.active[c] || contact.model != ContactModel::Nonlinear {
             continue;
@@ -148,7 +198,7 @@ fn select(model: &Model, ws: &mut Workspace, slip_max: f64) -> bool {
         let friction = xi[1].hypot(xi[2]);
         if xi[0] > 0.0 && friction >= (1.0 - SATURATION) * xi[0] && eta[1].hypot(eta[2]) < slip_max
         {
-            ws.saturated[c] = Some([xi[1] / friction, xi[2] / friction]);
+            ws.saturated[c] = Some(Hold::Sliding([xi[1] / friction, xi[2] / friction]));
             any = true;
         }
     }
@@ -161,7 +211,9 @@ fn select(model: &Model, ws: &mut Workspace, slip_max: f64) -> bool {
 fn consistent(model: &Model, ws: &Workspace) -> bool {
     let t = &model.topology;
     ws.saturated.iter().enumerate().all(|(c, held)| {
-        let Some(held) = *held else { return true };
+        let Some(Hold::Sliding(held)) = *held else {
+            return true;
+        };
         let o = t.pattern.offset(t.contact_node[c]);
         let (speed, slip) = (ws.w[o + SOC.1], [ws.w[o + SOC.1 + 1], ws.w[o + SOC.1 + 2]]);
         let (d, _) = direction(held, slip);

@@ -1,0 +1,127 @@
+//! Pairs of bodies that can only slide along one axis relative to each other, like the two
+//! fingers of a parallel gripper: friction between them cannot act on the motion.
+//!
+//! When every joint on the tree paths from two bodies to their common ancestor is rotationally
+//! locked and all their free translations are parallel, the bodies keep their relative
+//! orientation and move apart only along that axis `a`. A contact between them whose normal is
+//! `a` (a box corner on the box face facing the other finger) has no tangential slip: two
+//! touching points of the pair move apart along `a` only. Its friction impulses then just trade
+//! places with the joints' reaction impulses — a whole family of solutions with the same
+//! motion — and the Newton matrix of the interior-point solve is singular in that family but
+//! for the barrier terms, which vanish as κ → 0. The Panda's pressed finger pads (32 sticking
+//! cones) jammed its solves for hundreds of iterations there; so the solver holds such a
+//! contact's friction at zero ([`crate::solver`]'s `Hold::Frictionless`), which leaves the
+//! motion unchanged. The axes are found here, once, when the model is compiled.
+use nalgebra::{Matrix3, Vector3};
+
+use crate::joints::Joint;
+use crate::math::quat;
+
+/// The axis along which bodies `a` and `b` can move relative to each other, in `a`'s and `b`'s
+/// COM frames, when that is their only relative motion (see the module docs); `None` when they
+/// can also rotate relative to each other, translate along two axes, or not move at all.
+pub fn slide_axis(joints: &[Joint], a: usize, b: usize) -> Option<[Vector3<f64>; 2]> {
+    let (path_a, path_b) = (tree_path(joints, a)?, tree_path(joints, b)?);
+    // the common ancestor: the first body of a's path (a, its parent, …, 0) on b's
+    let common = *path_a.iter().find(|x| path_b.contains(x))?;
+    let mut axis: Option<Vector3<f64>> = None;
+    let mut frames = [Matrix3::identity(); 2];
+    for (side, path) in [&path_a, &path_b].into_iter().enumerate() {
+        // orientation relative to the common ancestor, from the ancestor down
+        let below: Vec<usize> = path.iter().take_while(|&&x| x != common).copied().collect();
+        let mut rot = Matrix3::identity();
+        for &child in below.iter().rev() {
+            let joint = tree_joint(joints, child)?;
+            if joint.rot.nfree() > 0 {
+                return None;
+            }
+            // a rotationally locked joint holds the child at its offset from the parent
+            rot *= quat::rotation(&joint.offset);
+            for k in 0..joint.ntrans {
+                let t = rot * joint.trans_basis.column(k).into_owned();
+                let t = t.try_normalize(1e-12)?;
+                match axis {
+                    None => axis = Some(t),
+                    Some(a) if a.cross(&t).norm() <= PARALLEL => {}
+                    Some(_) => return None,
+                }
+            }
+        }
+        frames[side] = rot;
+    }
+    let axis = axis?;
+    Some([frames[0].transpose() * axis, frames[1].transpose() * axis])
+}
+
+/// Largest `|a × t|` of two unit axes that count as parallel.
+const PARALLEL: f64 = 1e-9;
+
+/// The joint holding body `x` to its parent in the kinematic tree (loop joints do not count).
+fn tree_joint(joints: &[Joint], x: usize) -> Option<&Joint> {
+    joints.iter().find(|j| j.child == x && !j.is_loop)
+}
+
+/// `x`, its parent, …, up to the world (body 0); `None` if a body has no tree joint.
+fn tree_path(joints: &[Joint], mut x: usize) -> Option<Vec<usize>> {
+    let mut path = vec![x];
+    while x != 0 {
+        x = tree_joint(joints, x)?.parent;
+        if path.contains(&x) {
+            return None;
+        }
+        path.push(x);
+    }
+    Some(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{BodySpec, JointKind, JointSpec, ModelBuilder};
+
+    /// A hand hinged to the world with two fingers sliding on it; `axes` are the fingers'
+    /// slide axes (in their own frames) and `quat` the second finger's orientation.
+    fn gripper(axes: [[f64; 3]; 2], quat: [f64; 4]) -> crate::Model {
+        let mut b = ModelBuilder::new();
+        b.add_body(BodySpec::new("hand", 1.0, [0.1; 3]));
+        b.add_body(BodySpec::new("f1", 0.1, [0.01; 3]));
+        b.add_body(BodySpec::new("f2", 0.1, [0.01; 3]).quat(quat));
+        b.add_joint(JointSpec::new(
+            "wrist",
+            JointKind::Revolute,
+            "world",
+            "hand",
+        ));
+        for (i, a) in axes.iter().enumerate() {
+            let f = format!("f{}", i + 1);
+            b.add_joint(
+                JointSpec::new(&format!("s{}", i + 1), JointKind::Prismatic, "hand", &f).axis(*a),
+            );
+        }
+        b.compile().unwrap()
+    }
+
+    #[test]
+    fn fingers_sliding_on_one_axis_have_it_as_their_axis() {
+        // the second finger turned half a turn about z on the hand, sliding along its own y:
+        // the hand's -y axis
+        let m = gripper([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]], [0.0, 0.0, 0.0, 1.0]);
+        let [a, b] = slide_axis(&m.joints, 2, 3).expect("parallel slides");
+        assert!(a.cross(&Vector3::y()).norm() < 1e-12, "{a}");
+        assert!(b.cross(&Vector3::y()).norm() < 1e-12, "{b}");
+        // a finger and its hand: one slide
+        assert!(slide_axis(&m.joints, 1, 2).is_some());
+    }
+
+    #[test]
+    fn other_relative_motions_have_no_axis() {
+        let id = [1.0, 0.0, 0.0, 0.0];
+        // slides along two axes
+        let m = gripper([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]], id);
+        assert!(slide_axis(&m.joints, 2, 3).is_none());
+        // a finger and the world: the wrist turns
+        let m = gripper([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]], id);
+        assert!(slide_axis(&m.joints, 0, 2).is_none());
+        assert!(slide_axis(&m.joints, 1, 0).is_none());
+    }
+}
