@@ -73,20 +73,9 @@ fn pressed_pads_hold_no_friction_and_conserve_angular_momentum() {
     let l0 = mechanics::angular_momentum(&held, &a)[2];
     let (mut drift_held, mut drift_free, mut pressed) = (0.0f64, 0.0f64, 0);
     for k in 0..150 {
-        assert!(
-            step(&held, &mut a, &mut wa, &[])
-                .unwrap()
-                .status
-                .is_success(),
-            "step {k}"
-        );
-        assert!(
-            step(&free, &mut b, &mut wb, &[])
-                .unwrap()
-                .status
-                .is_success(),
-            "step {k}"
-        );
+        for (m, s, ws) in [(&held, &mut a, &mut wa), (&free, &mut b, &mut wb)] {
+            assert!(step(m, s, ws, &[]).unwrap().status.is_success(), "step {k}");
+        }
         assert_eq!(wb.frictionless_contacts(), 0);
         pressed += usize::from(wa.frictionless_contacts() > 0);
         drift_held = drift_held.max((mechanics::angular_momentum(&held, &a)[2] - l0).abs() / l0);
