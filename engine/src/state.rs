@@ -448,6 +448,10 @@ pub struct Workspace {
     /// Per contact candidate, then per joint: whether its complementarity pairs block the
     /// interior-point direction (`solver::central::unblock`'s scratch).
     pub(crate) blocking: Vec<bool>,
+    /// Per contact candidate: left out of this step's solve because a tighter candidate between
+    /// the same two sliding bodies, along the same normal, implies it
+    /// (`solver::saturation::hold_frictionless`).
+    pub(crate) shadowed: Vec<bool>,
     pub(crate) topology_id: u64,
     /// Nesterov–Todd scaling of each contact's friction-cone pair at the current interior-point
     /// iterate (`None`: unscaled rows), used while `nt_on` (the IPM's directions; the
@@ -657,6 +661,12 @@ impl Workspace {
             .count()
     }
 
+    /// Contact candidates the last step left out because a tighter parallel one between the same
+    /// sliding bodies implies them (`Options::drop_redundant_friction`).
+    pub fn shadowed_contacts(&self) -> usize {
+        self.shadowed.iter().filter(|&&s| s).count()
+    }
+
     /// Contacts whose friction the last step held on its cone's boundary, saturated and
     /// nearly still (the κ = 0 polish of `solver::saturation`).
     pub fn saturated_contacts(&self) -> usize {
@@ -719,6 +729,7 @@ impl Workspace {
             limit_slack_now: vec![[1.0; 2]; nlim + model.tendon_limits.len()],
             saturated: vec![None; model.ncontact()],
             blocking: vec![false; model.ncontact() + model.joints.len()],
+            shadowed: vec![false; model.ncontact()],
             matrix: BlockMatrix::new(&t.pattern),
             w: vec![0.0; n],
             w_trial: vec![0.0; n],

@@ -136,16 +136,23 @@ impl Contact {
     /// a box corner measured against the face of a box that faces along the axis. Other
     /// features' normals turn as the pair slides, and keep their friction.
     pub fn cannot_slip(&self, frozen: Option<Frozen>) -> bool {
-        let (Some(axes), Some(Frozen::Face { axis, .. })) = (self.slide_axes, frozen) else {
-            return false;
+        self.normal_along_slide(frozen).is_some()
+    }
+
+    /// `n · a` (±1) for a candidate that [cannot slip](Self::cannot_slip): its normal `n` (from
+    /// B to A) against the pair's slide axis `a`, both in either geom's frame.
+    pub fn normal_along_slide(&self, frozen: Option<Frozen>) -> Option<f64> {
+        let (Some(axes), Some(Frozen::Face { axis, sign })) = (self.slide_axes, frozen) else {
+            return None;
         };
-        // the measuring box: B for a corner of A (or a ball) on B, A for a ball of B on A
+        // the measuring box: B for a corner of A (or a ball) on B, whose face's outward normal
+        // is n; A for a ball of B on A, whose face's outward normal is -n
         let along = match self.feature {
-            Feature::SphereBox { .. } => axes[1][axis],
-            Feature::BoxSphere { .. } => axes[0][axis],
-            _ => return false,
+            Feature::SphereBox { .. } => sign * axes[1][axis],
+            Feature::BoxSphere { .. } => -sign * axes[0][axis],
+            _ => return None,
         };
-        along.abs() >= 1.0 - 1e-12
+        (along.abs() >= 1.0 - 1e-12).then_some(along.signum())
     }
 }
 

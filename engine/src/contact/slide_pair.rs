@@ -11,7 +11,9 @@
 //! for the barrier terms, which vanish as κ → 0. The Panda's pressed finger pads (32 sticking
 //! cones) jammed its solves for hundreds of iterations there; so the solver holds such a
 //! contact's friction at zero ([`crate::solver`]'s `Hold::Frictionless`), which leaves the
-//! motion unchanged. The axes are found here, once, when the model is compiled.
+//! motion unchanged, and of such contacts between the same bodies along the same normal keeps
+//! only the tightest: their gaps are one relative coordinate shifted by constants. The axes are
+//! found here, once, when the model is compiled.
 use nalgebra::{Matrix3, Vector3};
 
 use crate::joints::Joint;

@@ -65,9 +65,11 @@ pub struct Options {
     pub cone_gap: bool,
     /// Hold at zero the friction of a contact between two bodies that can only slide along the
     /// contact normal relative to each other (a parallel gripper's finger pads pressed
-    /// together, [`crate::contact::slide_pair`]). Default true. Such a contact cannot slip: its
-    /// friction only trades places with the joints' reactions and never changes the motion,
-    /// but it leaves the solve a family of solutions, which jammed the Panda's solves.
+    /// together, [`crate::contact::slide_pair`]), and of such contacts between the same two
+    /// bodies along the same normal solve only the tightest, which implies the others. Default
+    /// true. Such a contact cannot slip: its friction only trades places with the joints'
+    /// reactions and never changes the motion, but it leaves the solve a family of solutions,
+    /// which jammed the Panda's solves.
     pub drop_redundant_friction: bool,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,

@@ -540,7 +540,8 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
         ws.geom_bounds[g] = GeomBound::at(geom, &next_pose(&next, geom.body));
     }
     for (c, contact) in model.contacts.iter().enumerate() {
-        if ws.active[c] {
+        // (a shadowed candidate is implied by a tighter one that took part)
+        if ws.active[c] || ws.shadowed[c] {
             continue;
         }
         let floor = 0.25 * candidate_margin(model, contact);

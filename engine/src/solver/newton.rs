@@ -161,6 +161,7 @@ pub(crate) fn prepare(
     prepare_forces(model, state, ws, ctrl, forces);
     ws.attempt = 0;
     ws.saturated.fill(None);
+    ws.shadowed.fill(false);
     if let Some(trace) = ws.trace.as_mut() {
         trace.clear();
     }

@@ -73,24 +73,62 @@ pub(crate) enum Hold {
 /// Hold the friction of every active candidate that cannot slip at zero ([`Hold::Frictionless`],
 /// setting `ξ₂:₃ = η₁ = 0` in the iterate), and release any such hold of a candidate that can
 /// slip again (its feature changed). Called whenever a solve starts its iterate.
+///
+/// Of the candidates that cannot slip between the same two bodies with the same normal, only
+/// the tightest (smallest gap) takes part; the others are left out of the step
+/// (`Workspace::shadowed`). Why: the two bodies only translate along the normal relative to
+/// each other, so each such candidate's gap is the same function of that translation shifted
+/// by a constant, and the tightest one implies the rest; their normal impulses are collinear
+/// pairs, so where they push does not move anything. Kept, they are a family of equal
+/// solutions (the Panda's pressed pads: up to 160 candidates on one relative coordinate).
 pub(crate) fn hold_frictionless(model: &Model, ws: &mut Workspace) {
     let t = &model.topology;
-    let drop = model.options.drop_redundant_friction;
-    for &c in &t.slide_candidates {
-        let contact = &model.contacts[c];
-        let held = drop && ws.active[c] && contact.cannot_slip(ws.frozen[c]);
-        match (held, ws.saturated[c]) {
-            (true, _) => {
-                ws.saturated[c] = Some(Hold::Frictionless);
-                let o = t.pattern.offset(t.contact_node[c]);
-                ws.w[o + SOC.0 + 1] = 0.0;
-                ws.w[o + SOC.0 + 2] = 0.0;
-                ws.w[o + SOC.1] = 0.0;
+    if !model.options.drop_redundant_friction {
+        for &c in &t.slide_candidates {
+            if ws.saturated[c] == Some(Hold::Frictionless) {
+                ws.saturated[c] = None;
             }
-            (false, Some(Hold::Frictionless)) => ws.saturated[c] = None,
-            (false, _) => {}
+        }
+        return;
+    }
+    // (body pair, normal along the slide axis from the first body's side) → tightest candidate
+    let mut tightest: Vec<((usize, usize, bool), usize)> = Vec::new();
+    for &c in &t.slide_candidates {
+        // a candidate shadowed earlier in the step stands again unless still implied
+        let pool = ws.active[c] || ws.shadowed[c];
+        ws.active[c] = pool;
+        ws.shadowed[c] = false;
+        let contact = &model.contacts[c];
+        let along = contact.normal_along_slide(ws.frozen[c]).filter(|_| pool);
+        let Some(along) = along else {
+            if ws.saturated[c] == Some(Hold::Frictionless) {
+                ws.saturated[c] = None;
+            }
+            continue;
+        };
+        ws.saturated[c] = Some(Hold::Frictionless);
+        let o = t.pattern.offset(t.contact_node[c]);
+        ws.w[o + SOC.0 + 1] = 0.0;
+        ws.w[o + SOC.0 + 2] = 0.0;
+        ws.w[o + SOC.1] = 0.0;
+        let [a, b] = t.contact_bodies[c];
+        let key = (a.min(b), a.max(b), (along > 0.0) == (a < b));
+        match tightest.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, best)) if ws.contact_phi_now[c] < ws.contact_phi_now[*best] => {
+                shadow(ws, *best);
+                *best = c;
+            }
+            Some(_) => shadow(ws, c),
+            None => tightest.push((key, c)),
         }
     }
+}
+
+/// Leave candidate `c` out of the step: a tighter one implies it ([`hold_frictionless`]).
+fn shadow(ws: &mut Workspace, c: usize) {
+    ws.active[c] = false;
+    ws.shadowed[c] = true;
+    ws.saturated[c] = None;
 }
 
 /// Release the sliding holds, keeping the frictionless ones.
