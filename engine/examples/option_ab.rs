@@ -75,6 +75,15 @@ fn main() {
                 e(&next[0]),
                 e(&next[1])
             );
+            let (fa, fb) = (
+                next[0].contact_impulse(&base),
+                next[1].contact_impulse(&base),
+            );
+            for (c, (x, y)) in fa.chunks(3).zip(fb.chunks(3)).enumerate() {
+                if (x[0] - y[0]).abs() + (x[1] - y[1]).abs() + (x[2] - y[2]).abs() > 1e-4 {
+                    println!("  contact {c}: A {x:?} B {y:?}");
+                }
+            }
         }
         diff = diff.max(d);
         let [a, _] = next;

@@ -661,6 +661,16 @@ impl Workspace {
             .count()
     }
 
+    /// Active contacts whose friction the last step held at zero because they stayed apart
+    /// (`Options::drop_redundant_friction`, `solver::saturation::hold_separated`).
+    pub fn separated_contacts(&self) -> usize {
+        self.saturated
+            .iter()
+            .zip(&self.active)
+            .filter(|&(s, &a)| a && *s == Some(crate::solver::saturation::Hold::Separated))
+            .count()
+    }
+
     /// Contact candidates the last step left out because a tighter parallel one between the same
     /// sliding bodies implies them (`Options::drop_redundant_friction`).
     pub fn shadowed_contacts(&self) -> usize {

@@ -66,6 +66,7 @@ pub(crate) fn solve(
 ) -> StepReport {
     ws.active.fill(true);
     super::saturation::release_sliding(ws);
+    super::saturation::release_separated(ws);
     match start {
         Start::Hard => {
             super::activation::ensure_prepared(model, state, ws);
@@ -197,7 +198,7 @@ pub(crate) fn centre(model: &Model, state: &State, ws: &mut Workspace, kappa: f6
 
 /// [`centre`] for the contact candidates `c` with `contact(c)` and the limited joints `j` with
 /// `limit(j)` only; the other pairs keep their values.
-fn centre_some(
+pub(crate) fn centre_some(
     model: &Model,
     state: &State,
     ws: &mut Workspace,

@@ -412,7 +412,9 @@ fn contact_rows(
                     r[4] = xi[1] - xi[0] * d[0];
                     r[5] = xi[2] - xi[0] * d[1];
                 }
-                Some(Hold::Frictionless) => r[3..6].copy_from_slice(&[eta[0], xi[1], xi[2]]),
+                Some(Hold::Frictionless | Hold::Separated) => {
+                    r[3..6].copy_from_slice(&[eta[0], xi[1], xi[2]]);
+                }
             }
             r[6] = eta[1] - vt(1);
             r[7] = eta[2] - vt(2);
@@ -655,7 +657,7 @@ fn contact_diag(
                 set(4 + i, 6 + i, x[2]);
                 set(6 + i, 6 + i, 1.0); // η₂:₃ - v_t
             }
-            if saturated == Some(Hold::Frictionless) {
+            if matches!(saturated, Some(Hold::Frictionless | Hold::Separated)) {
                 // η₁ and ξ₂:₃
                 for r in 3..6 {
                     for k in 2..8 {

@@ -68,7 +68,14 @@ pub(crate) enum Hold {
     /// ([`crate::contact::slide_pair`]). Held for the whole step, and in the gradients'
     /// central-path solves.
     Frictionless,
+    /// No friction while the gap stays open: a candidate at least [`SEPARATED_GAP`] apart
+    /// when the step starts, until its gap slack falls below that ([`hold_separated`]).
+    Separated,
 }
+
+/// Gap (m) above which an active candidate's friction is held at zero during a hard solve
+/// ([`hold_separated`]), and below which the hold is released.
+pub(crate) const SEPARATED_GAP: f64 = 1e-3;
 
 /// Hold the friction of every active candidate that cannot slip at zero ([`Hold::Frictionless`],
 /// setting `ξ₂:₃ = η₁ = 0` in the iterate), and release any such hold of a candidate that can
@@ -129,6 +136,77 @@ fn shadow(ws: &mut Workspace, c: usize) {
     ws.active[c] = false;
     ws.shadowed[c] = true;
     ws.saturated[c] = None;
+}
+
+/// Hold the friction of every active friction-cone candidate that is at least
+/// [`SEPARATED_GAP`] apart at the step's start at zero ([`Hold::Separated`]: `ξ₂:₃ = 0`,
+/// `η₁ = 0` set in the iterate); returns how many. Released by [`release_closing`] as soon
+/// as an iterate's gap slack comes within [`SEPARATED_GAP`], so at the solution every held
+/// candidate is apart, where its friction is zero (up to the central path's `O(κ)`).
+///
+/// Why: such a candidate (activated because it may come within reach during the step) has
+/// no friction at the solution, but its cone pair still takes part in the iteration: its
+/// slip member sits on its cone's boundary at the tangential velocity, and when the velocity
+/// turns, the pair, its impulse member ~1e-6, cuts the step (humanoid, Table V step 100: four
+/// such candidates cut the first iterations to α = 7e-4…0.2). Measured with `option_ab`
+/// (same states) in BENCHMARKS "Session 24".
+pub(crate) fn hold_separated(model: &Model, ws: &mut Workspace) -> usize {
+    let t = &model.topology;
+    let mut held = 0;
+    for (c, contact) in model.contacts.iter().enumerate() {
+        if !ws.active[c]
+            || ws.saturated[c].is_some()
+            || contact.model != ContactModel::Nonlinear
+            || ws.contact_phi_now[c].is_nan()
+            || ws.contact_phi_now[c] <= SEPARATED_GAP
+        {
+            continue;
+        }
+        ws.saturated[c] = Some(Hold::Separated);
+        let o = t.pattern.offset(t.contact_node[c]);
+        ws.w[o + SOC.0 + 1] = 0.0;
+        ws.w[o + SOC.0 + 2] = 0.0;
+        ws.w[o + SOC.1] = 0.0;
+        held += 1;
+    }
+    held
+}
+
+/// Release the [`Hold::Separated`] candidates whose gap slack `s` fell below
+/// [`SEPARATED_GAP`], their cone pairs moved onto the central path at `kappa`
+/// ([`super::central::centre_some`]); returns how many.
+pub(crate) fn release_closing(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    kappa: f64,
+) -> usize {
+    let t = &model.topology;
+    let mut closing = std::mem::take(&mut ws.blocking);
+    closing.fill(false);
+    let mut released = 0;
+    for (c, close) in closing.iter_mut().enumerate().take(model.ncontact()) {
+        let o = t.pattern.offset(t.contact_node[c]);
+        if ws.saturated[c] == Some(Hold::Separated) && ws.w[o + 1] < SEPARATED_GAP {
+            ws.saturated[c] = None;
+            *close = true;
+            released += 1;
+        }
+    }
+    if released > 0 {
+        super::central::centre_some(model, state, ws, kappa, |c| closing[c], |_| false);
+    }
+    ws.blocking = closing;
+    released
+}
+
+/// Release every [`Hold::Separated`] candidate (their iterate values are left as they are).
+pub(crate) fn release_separated(ws: &mut Workspace) {
+    for held in &mut ws.saturated {
+        if *held == Some(Hold::Separated) {
+            *held = None;
+        }
+    }
 }
 
 /// Release the sliding holds, keeping the frictionless ones.
@@ -221,7 +299,7 @@ fn select(model: &Model, ws: &mut Workspace, slip_max: f64) -> bool {
     let t = &model.topology;
     let mut any = false;
     for (c, contact) in model.contacts.iter().enumerate() {
-        if ws.saturated[c] == Some(Hold::Frictionless) {
+        if matches!(ws.saturated[c], Some(Hold::Frictionless | Hold::Separated)) {
             continue;
         }
         ws.saturated[c] = None;
