@@ -654,21 +654,22 @@ impl Workspace {
     /// Active contacts whose friction the last step held at zero: pairs that can only slide
     /// along the contact normal (`Options::drop_redundant_friction`).
     pub fn frictionless_contacts(&self) -> usize {
+        self.active_held(crate::solver::saturation::Hold::Frictionless)
+    }
+
+    /// Active contacts held with `hold` by the last step.
+    fn active_held(&self, hold: crate::solver::saturation::Hold) -> usize {
         self.saturated
             .iter()
             .zip(&self.active)
-            .filter(|&(s, &a)| a && *s == Some(crate::solver::saturation::Hold::Frictionless))
+            .filter(|&(s, &a)| a && *s == Some(hold))
             .count()
     }
 
     /// Active contacts whose friction the last step held at zero because they stayed apart
     /// (`Options::drop_redundant_friction`, `solver::saturation::hold_separated`).
     pub fn separated_contacts(&self) -> usize {
-        self.saturated
-            .iter()
-            .zip(&self.active)
-            .filter(|&(s, &a)| a && *s == Some(crate::solver::saturation::Hold::Separated))
-            .count()
+        self.active_held(crate::solver::saturation::Hold::Separated)
     }
 
     /// Contact candidates the last step left out because a tighter parallel one between the same

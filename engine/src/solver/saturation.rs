@@ -113,11 +113,7 @@ pub(crate) fn hold_frictionless(model: &Model, ws: &mut Workspace) {
             }
             continue;
         };
-        ws.saturated[c] = Some(Hold::Frictionless);
-        let o = t.pattern.offset(t.contact_node[c]);
-        ws.w[o + SOC.0 + 1] = 0.0;
-        ws.w[o + SOC.0 + 2] = 0.0;
-        ws.w[o + SOC.1] = 0.0;
+        hold_without_friction(model, ws, c, Hold::Frictionless);
         let [a, b] = t.contact_bodies[c];
         let key = (a.min(b), a.max(b), (along > 0.0) == (a < b));
         match tightest.iter_mut().find(|(k, _)| *k == key) {
@@ -129,6 +125,17 @@ pub(crate) fn hold_frictionless(model: &Model, ws: &mut Workspace) {
             None => tightest.push((key, c)),
         }
     }
+}
+
+/// Hold candidate `c` with no friction (`hold`: [`Hold::Frictionless`] or
+/// [`Hold::Separated`]), its iterate set on the held rows: `ξ₂:₃ = 0`, `η₁ = 0`.
+fn hold_without_friction(model: &Model, ws: &mut Workspace, c: usize, hold: Hold) {
+    let t = &model.topology;
+    ws.saturated[c] = Some(hold);
+    let o = t.pattern.offset(t.contact_node[c]);
+    ws.w[o + SOC.0 + 1] = 0.0;
+    ws.w[o + SOC.0 + 2] = 0.0;
+    ws.w[o + SOC.1] = 0.0;
 }
 
 /// Leave candidate `c` out of the step: a tighter one implies it ([`hold_frictionless`]).
@@ -151,7 +158,6 @@ fn shadow(ws: &mut Workspace, c: usize) {
 /// such candidates cut the first iterations to α = 7e-4…0.2). Measured with `option_ab`
 /// (same states) in BENCHMARKS "Session 24".
 pub(crate) fn hold_separated(model: &Model, ws: &mut Workspace) -> usize {
-    let t = &model.topology;
     let mut held = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
         if !ws.active[c]
@@ -162,11 +168,7 @@ pub(crate) fn hold_separated(model: &Model, ws: &mut Workspace) -> usize {
         {
             continue;
         }
-        ws.saturated[c] = Some(Hold::Separated);
-        let o = t.pattern.offset(t.contact_node[c]);
-        ws.w[o + SOC.0 + 1] = 0.0;
-        ws.w[o + SOC.0 + 2] = 0.0;
-        ws.w[o + SOC.1] = 0.0;
+        hold_without_friction(model, ws, c, Hold::Separated);
         held += 1;
     }
     held
