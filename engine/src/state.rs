@@ -468,6 +468,12 @@ pub struct Workspace {
     /// Whether the last interior-point attempt ended stalled near convergence
     /// (`Options::acceptable_iter`): its acceptable iterate ends the solve without retries.
     pub(crate) stalled_near: bool,
+    /// The left-out candidates' pairs modelled in the mean complementarity (none but in the
+    /// third activation tier, see `FarPairs`).
+    pub(crate) far: crate::solver::inequality::FarPairs,
+    /// Whether the third activation tier activates every candidate rather than modelling the
+    /// left-out ones (`newton::solve`): set by a step's last resort (`step::long_solve`).
+    pub(crate) every_candidate: bool,
 }
 
 /// Most spare workspaces kept per thread ([`Workspace::pooled`]): a linearisation holds two
@@ -769,6 +775,8 @@ impl Workspace {
             trace_condition: false,
             attempt: 0,
             stalled_near: false,
+            far: Default::default(),
+            every_candidate: false,
         }
     }
 }

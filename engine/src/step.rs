@@ -144,7 +144,8 @@ pub fn step_with(
 
 /// The last resort of a step whose whole solve and every subdivision failed (`whole_converged`
 /// false; else `None` at once): the whole step from `start` solved again with four times the
-/// iteration budget, kept only if it converges without gaining energy ([`gains_energy`]); its
+/// iteration budget and every candidate active in the third activation tier
+/// (`Workspace::every_candidate`), kept only if it converges without gaining energy ([`gains_energy`]); its
 /// next state and report (solution in `ws`), else `None`. The shared Panda's step 135 under
 /// Table V's random controls (fingers closing onto their limits and each other while a pad
 /// slides on the floor under ~150 N: sliding friction cones cut the step lengths to 0.01-0.3)
@@ -166,7 +167,9 @@ pub(crate) fn long_solve(
         ..model.options.clone()
     })?;
     newton::prepare(&long, start, ws, ctrl, forces);
+    ws.every_candidate = true;
     let report = newton::solve(&long, start, ws);
+    ws.every_candidate = false;
     if !report.status.is_success() {
         return Ok(None);
     }

@@ -1,5 +1,7 @@
 //! The Table V workload shared by the examples: the model's first keyframe (else its reference
-//! pose) and deterministic controls uniform in each actuator's control range.
+//! pose) and deterministic controls uniform in each actuator's control range, or, with
+//! `UKEMI_CTRLS=FILE`, each step's controls from FILE (one step per line, separated by commas or
+//! white space: e.g. the Python benchmark's `np.savetxt(FILE, ctrls, delimiter=",")`).
 use ukemi_engine::{Model, State, mjcf, set_minimal};
 
 /// The MJCF model at `path` with Table V's time step, 0.01 s.
@@ -24,6 +26,8 @@ pub fn start_state(model: &Model) -> State {
 /// Deterministic controls (a 64-bit LCG), uniform in each control range ([-1, 1] if unlimited).
 pub struct Controls {
     seed: u64,
+    /// The rows of `UKEMI_CTRLS` and the next one to return.
+    rows: Option<(Vec<Vec<f64>>, usize)>,
 }
 
 impl Controls {
@@ -33,11 +37,40 @@ impl Controls {
 
     /// Another deterministic sequence.
     pub fn with_seed(seed: u64) -> Self {
-        Controls { seed }
+        let rows = std::env::var("UKEMI_CTRLS").ok().map(|f| {
+            let text =
+                std::fs::read_to_string(&f).unwrap_or_else(|e| panic!("UKEMI_CTRLS={f}: {e}"));
+            let rows = text
+                .lines()
+                .map(|l| {
+                    l.split(|c: char| c == ',' || c.is_whitespace())
+                        .filter(|x| !x.is_empty())
+                        .map(|x| x.parse().unwrap())
+                        .collect()
+                })
+                .collect();
+            (rows, 0)
+        });
+        Controls { seed, rows }
     }
 
     /// The next control vector.
     pub fn next(&mut self, model: &Model) -> Vec<f64> {
+        if let Some((rows, k)) = &mut self.rows {
+            let row = rows
+                .get(*k)
+                .unwrap_or_else(|| panic!("UKEMI_CTRLS: no controls for step {k}"))
+                .clone();
+            assert_eq!(
+                row.len(),
+                model.nu(),
+                "UKEMI_CTRLS: step {k} has {} controls, the model {}",
+                row.len(),
+                model.nu()
+            );
+            *k += 1;
+            return row;
+        }
         model
             .actuators
             .iter()

@@ -189,7 +189,8 @@ pub(crate) fn solve_to(
             window_start = progress;
         }
         report.iterations = it + 1;
-        let mu0 = mean_complementarity(model, &ws.active, &ws.w, &ws.delta_aff, 0.0);
+        let mu0 = mean_complementarity(model, &ws.active, &ws.w, &ws.delta_aff, 0.0)
+            + ws.far.mean(model, 0.0);
         ws.nt_on = o.nt_scaling && !ws.nt_disabled && mu0 > NT_MU_FLOOR;
         if ws.nt_on {
             update_scalings(model, ws);
@@ -226,8 +227,10 @@ pub(crate) fn solve_to(
             vio = evaluate_kept(model, state, ws, false, 0.0);
             continue;
         }
-        let mu = mean_complementarity(model, act, &ws.w, &ws.delta_aff, 0.0);
-        let mu_aff = mean_complementarity(model, act, &ws.w, &ws.delta_aff, alpha_aff);
+        let mu =
+            mean_complementarity(model, act, &ws.w, &ws.delta_aff, 0.0) + ws.far.mean(model, 0.0);
+        let mu_aff = mean_complementarity(model, act, &ws.w, &ws.delta_aff, alpha_aff)
+            + ws.far.mean(model, alpha_aff);
         let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
         let kappa = (sigma * mu).max(floor);
         // corrector: Δ = -R⁻¹ (r(w, κ) + Δb_aff ∘ Δc_aff), reusing the factorisation
@@ -272,6 +275,9 @@ pub(crate) fn solve_to(
                 corrector,
                 condition,
             });
+        }
+        if let Some(a) = accepted {
+            ws.far.advance(a, kappa);
         }
         // (the line search evaluated an accepted iterate last: no evaluation then)
         vio = recentre(model, state, ws, 0.0);

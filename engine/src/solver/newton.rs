@@ -12,6 +12,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::activation::Reach;
+use super::inequality::FarPairs;
 use crate::integrator::variational::{momentum_residual, rot_jacobian};
 use crate::joints::Joint;
 use crate::joints::geometry::{JointFrame, Pose};
@@ -198,6 +199,10 @@ fn restart_cold(model: &Model, state: &State, ws: &mut Workspace) {
         ws.w[o + 3..o + 6].copy_from_slice(w.as_slice());
     }
     super::inequality::initialize(model, state, ws, false);
+    // modelled far pairs start where active ones would: at the neutral point
+    if ws.far.count > 0.0 {
+        ws.far.product = 1.0;
+    }
 }
 
 /// Spring + applied generalized force on the free dofs of joint `ji` at its coordinates `coords`.
@@ -728,16 +733,32 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     let mut report = solve_active(model, state, ws, RETRIES);
     // Activation is a speed heuristic and must never cost a step: a solve that failed with
     // some candidates left out is solved again with the candidates any point of whose geoms
-    // could reach (`Reach::Bound`), then with every candidate active. (Far candidates
-    // hold complementarity pairs that sit on the central path at every κ; with them the mean
-    // complementarity, hence the centering, changes, and some stalled solves converge: random
-    // scene 543 step 38 stalls at k = 1.3e-8 without them and converges in 13 iterations with.)
+    // could reach (`Reach::Bound`), then with the others' pairs modelled on the central path
+    // (`FarPairs`), or, in a step's last resort (`Workspace::every_candidate`), with every
+    // candidate active. (Far candidates hold complementarity pairs that sit on the central
+    // path at every κ; with them the mean complementarity, hence the centering, changes, and
+    // some stalled solves converge: random scene 543 step 38 stalls at k = 1.3e-8 without them
+    // and converges in 13 iterations with.)
     // Warm, then one cold retry: the Panda's 835 candidates made the second cold retry cost
     // more than the rest of a run (`step_bench`, 8 × 300 steps: 16-18 → 14-15 ms/step, the same
     // unconverged steps; the stress suite unchanged; with no cold retry scene 613 fails).
     for wider in [Reach::Bound, Reach::All] {
         if report.status.is_success() {
             break;
+        }
+        if wider == Reach::All && !ws.every_candidate {
+            let far = FarPairs::left_out(model, &ws.active, 0.0);
+            if far.count == 0.0 {
+                continue; // nothing left out: the same solve again
+            }
+            let iterations = report.iterations;
+            ws.attempt += 1;
+            ws.far = far;
+            restart_warm(model, state, ws);
+            report = solve_active(model, state, ws, 1);
+            ws.far = FarPairs::default();
+            report.iterations += iterations;
+            continue;
         }
         // (a wider set that adds nothing would fail the same way)
         if super::activation::activate(model, state, ws, wider) == 0 {
