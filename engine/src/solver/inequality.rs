@@ -825,8 +825,9 @@ pub(crate) fn mean_complementarity(
 /// Why: a solve that stalls with the activated candidates sometimes converges with every
 /// candidate active, because the far pairs, tracking the targets, hold `μ` up and slow the
 /// centring down. Activating every candidate did that at the cost of their rows: the shared
-/// humanoid's 371 candidates made one such solve 3.5 times as costly per iteration, and the
-/// third activation tier spent 93 of Table V step 272's 112 ms (it failed there anyway).
+/// humanoid's 371 candidates made such an iteration ~7× as costly (22–27 ms per 50 iterations
+/// against 3 ms), and Table V's slowest humanoid step spent 122 of its 414 iterations there
+/// (failing anyway; BENCHMARKS.md, session 25).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct FarPairs {
     /// How many pairs are modelled (0: none).
