@@ -29,18 +29,9 @@ fn main() {
         .ok()
         .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect());
     // UKEMI_TRACE_CTRLS=FILE: each step's controls from a file, one line per step
-    let from_file: Option<Vec<Vec<f64>>> = std::env::var("UKEMI_TRACE_CTRLS").ok().map(|f| {
-        std::fs::read_to_string(&f)
-            .unwrap()
-            .lines()
-            .map(|l| {
-                l.split(|c: char| c == ',' || c.is_whitespace())
-                    .filter(|x| !x.is_empty())
-                    .map(|x| x.parse().unwrap())
-                    .collect()
-            })
-            .collect()
-    });
+    let from_file: Option<Vec<Vec<f64>>> = std::env::var("UKEMI_TRACE_CTRLS")
+        .ok()
+        .map(|f| workload::read_rows(&f));
     for k in 0..=which {
         let mut ctrl = controls.next(&model);
         if let Some(rows) = &from_file {

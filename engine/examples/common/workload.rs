@@ -23,6 +23,19 @@ pub fn start_state(model: &Model) -> State {
     state
 }
 
+/// The rows of numbers in the file at `path`, one per line, separated by commas or white space.
+pub fn read_rows(path: &str) -> Vec<Vec<f64>> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    text.lines()
+        .map(|l| {
+            l.split(|c: char| c == ',' || c.is_whitespace())
+                .filter(|x| !x.is_empty())
+                .map(|x| x.parse().unwrap())
+                .collect()
+        })
+        .collect()
+}
+
 /// Deterministic controls (a 64-bit LCG), uniform in each control range ([-1, 1] if unlimited).
 pub struct Controls {
     seed: u64,
@@ -37,20 +50,9 @@ impl Controls {
 
     /// Another deterministic sequence.
     pub fn with_seed(seed: u64) -> Self {
-        let rows = std::env::var("UKEMI_CTRLS").ok().map(|f| {
-            let text =
-                std::fs::read_to_string(&f).unwrap_or_else(|e| panic!("UKEMI_CTRLS={f}: {e}"));
-            let rows = text
-                .lines()
-                .map(|l| {
-                    l.split(|c: char| c == ',' || c.is_whitespace())
-                        .filter(|x| !x.is_empty())
-                        .map(|x| x.parse().unwrap())
-                        .collect()
-                })
-                .collect();
-            (rows, 0)
-        });
+        let rows = std::env::var("UKEMI_CTRLS")
+            .ok()
+            .map(|f| (read_rows(&f), 0));
         Controls { seed, rows }
     }
 
