@@ -121,11 +121,13 @@ def test_with_options_returns_new_model(pend):
 
 def test_iteration_counts_reject_negative_values_by_name(pend):
     # a negative count is a named ValueError (not pyo3's OverflowError); the model is unchanged
-    for name in ("max_iter", "endgame_iter", "acceptable_iter", "max_ls", "max_subdivisions"):
+    for name in ("max_iter", "endgame_iter", "acceptable_iter", "stall_iter", "max_ls",
+                 "max_subdivisions"):
         with pytest.raises(ValueError, match=name):
             pend.with_options(**{name: -1})
         assert pend.options[name] > 0
     assert pend.with_options(endgame_iter=0).options["endgame_iter"] == 0
+    assert pend.with_options(stall_iter=0).options["stall_iter"] == 0
 
 
 def test_switch_options_must_be_bools_and_are_named(pend):

@@ -467,6 +467,7 @@ impl PyModel {
             ("max_iter", o.max_iter as f64),
             ("endgame_iter", o.endgame_iter as f64),
             ("acceptable_iter", o.acceptable_iter as f64),
+            ("stall_iter", o.stall_iter as f64),
             ("max_ls", o.max_ls as f64),
             ("undercut", o.undercut),
             ("regularization", o.regularization),
@@ -511,7 +512,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -524,6 +525,7 @@ impl PyModel {
         max_iter: Option<i64>,
         endgame_iter: Option<i64>,
         acceptable_iter: Option<i64>,
+        stall_iter: Option<i64>,
         cone_gap: Option<Bound<'_, PyAny>>,
         drop_redundant_friction: Option<Bound<'_, PyAny>>,
         max_ls: Option<i64>,
@@ -570,6 +572,7 @@ impl PyModel {
             o.max_iter = count("max_iter", max_iter, o.max_iter)?;
             o.endgame_iter = count("endgame_iter", endgame_iter, o.endgame_iter)?;
             o.acceptable_iter = count("acceptable_iter", acceptable_iter, o.acceptable_iter)?;
+            o.stall_iter = count("stall_iter", stall_iter, o.stall_iter)?;
             o.cone_gap = flag("cone_gap", cone_gap, o.cone_gap)?;
             o.drop_redundant_friction = flag(
                 "drop_redundant_friction",

@@ -3,7 +3,7 @@
 //! range) runs with option value A, and every step is also solved from the same state with
 //! value B. `cargo run --release -p ukemi-engine --example option_ab -- MODEL.xml STEPS SEED
 //! OPTION A B` (SEED `default`: `step_bench`'s controls without a seed), OPTION one of
-//! `acceptable_iter`, `endgame_iter`, `max_iter`, `kappa_tol`, `rtol`, `cone_gap`, `activation_margin`, `drop_redundant_friction`. Prints, for A and B, the total iterations and seconds, the slowest step, failed
+//! `acceptable_iter`, `stall_iter`, `endgame_iter`, `max_iter`, `kappa_tol`, `rtol`, `cone_gap`, `activation_margin`, `drop_redundant_friction`. Prints, for A and B, the total iterations and seconds, the slowest step, failed
 //! steps, and the largest difference of the next states' positions (m); with `AB_VERBOSE=1`
 //! every step whose positions differ by more than 1e-7 m, with the energies before and after.
 #![allow(clippy::print_stdout)]
@@ -18,6 +18,7 @@ fn with(model: &Model, option: &str, value: f64) -> Model {
     let mut o = model.options.clone();
     match option {
         "acceptable_iter" => o.acceptable_iter = value as usize,
+        "stall_iter" => o.stall_iter = value as usize,
         "endgame_iter" => o.endgame_iter = value as usize,
         "max_iter" => o.max_iter = value as usize,
         "kappa_tol" => o.kappa_tol = value,

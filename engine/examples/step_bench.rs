@@ -4,6 +4,7 @@
 //! (SEED: another control sequence than the default one).
 //! Prints the best-of-`REPEATS` ms/step, the IPM iterations per step (mean, median, max, and
 //! the mean with each step capped at 100, which the rare stalled steps do not dominate), the
+//! share of the run's time spent in its slowest 1% of steps, the
 //! steps that were not converged or were subdivided, the mean active contact candidates, and a fingerprint of the final state (bits
 //! of every position, orientation and velocity) to check that a speed change kept the physics
 //! bit for bit.
@@ -35,9 +36,12 @@ fn main() {
         let (mut its, mut failed, mut subdivided, mut active, mut loaded) =
             (Vec::new(), 0, 0, 0, 0);
         let mut limits = 0;
+        let mut times = Vec::with_capacity(steps);
         let t0 = Instant::now();
         for ctrl in &ctrls {
+            let ts = Instant::now();
             let r = step(&model, &mut state, &mut ws, ctrl).unwrap();
+            times.push(ts.elapsed().as_secs_f64());
             its.push(r.iterations);
             failed += usize::from(!r.status.is_success());
             subdivided += usize::from(r.subdivisions > 1);
@@ -58,18 +62,21 @@ fn main() {
                 print = print.rotate_left(5) ^ x.to_bits();
             }
         }
-        last = Some((its, failed, subdivided, active, loaded, limits, print));
+        times.sort_unstable_by(|a, b| b.total_cmp(a));
+        let slow = times.iter().take(steps.div_ceil(100)).sum::<f64>() / times.iter().sum::<f64>();
+        last = Some((its, failed, subdivided, active, loaded, limits, print, slow));
     }
-    let (mut its, failed, subdivided, active, loaded, limits, print) = last.unwrap();
+    let (mut its, failed, subdivided, active, loaded, limits, print, slow) = last.unwrap();
     let total: usize = its.iter().sum();
     its.sort_unstable();
     println!(
-        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {} (capped at 100: mean {:.2}); unconverged {failed}, subdivided {subdivided}; active candidates {:.1} of {} ({:.1} with a normal impulse); limited joints active {:.1}; state fingerprint {print:016x}",
+        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {} (capped at 100: mean {:.2}); slowest 1% of steps {:.0}% of the time; unconverged {failed}, subdivided {subdivided}; active candidates {:.1} of {} ({:.1} with a normal impulse); limited joints active {:.1}; state fingerprint {print:016x}",
         1e3 * best / steps as f64,
         total as f64 / steps as f64,
         its[steps / 2],
         its[steps - 1],
         its.iter().map(|&i| i.min(100)).sum::<usize>() as f64 / steps as f64,
+        100.0 * slow,
         active as f64 / steps as f64,
         model.ncontact(),
         loaded as f64 / steps as f64,

@@ -278,7 +278,7 @@ pub enum SolveStatus {
     /// success: the state is valid to the acceptable tolerances, which `residual` and
     /// `complementarity` report.
     Acceptable,
-    /// `max_iter` reached first.
+    /// `max_iter` reached first, or the attempt stalled (`Options::stall_iter`).
     MaxIterations,
     /// No step length reduced the residual.
     LineSearchFailed,

@@ -139,6 +139,7 @@ pub(crate) fn solve_to(
     };
     let (mut unblocked, mut short, mut acceptable_run) = (0, 0, 0);
     let mut window_start = f64::INFINITY;
+    let (mut checkpoint, mut checkpoint_at) = (f64::INFINITY, 0);
     ws.stalled_near = false;
     for it in 0..o.max_iter + o.endgame_iter {
         if !(vio.r.is_finite() && vio.k.is_finite()) {
@@ -187,6 +188,18 @@ pub(crate) fn solve_to(
             }
             acceptable_run = 1;
             window_start = progress;
+        }
+        // an attempt whose worst violation has not fallen tenfold in `Options::stall_iter`
+        // iterations has stalled: the next retry (or sub-steps) does better than its budget
+        if progress < 0.1 * checkpoint {
+            (checkpoint, checkpoint_at) = (progress, it);
+        }
+        if o.stall_iter > 0
+            && central.is_none()
+            && !ws.every_candidate
+            && it >= checkpoint_at + o.stall_iter
+        {
+            break;
         }
         report.iterations = it + 1;
         let mu0 = mean_complementarity(model, &ws.active, &ws.w, &ws.delta_aff, 0.0)
