@@ -368,6 +368,9 @@ pub struct Workspace {
     /// The best acceptable iterate of a failed attempt, kept while retries try to converge; the
     /// interior-point solution while `solver::saturation` polishes it.
     pub(crate) w_acceptable: Vec<f64>,
+    /// The friction holds (`saturated`) of the acceptable iterate in `w_acceptable` kept by a
+    /// failed attempt: restored with it (the retries release and reset holds).
+    pub(crate) saturated_acceptable: Vec<Option<crate::solver::saturation::Hold>>,
     pub(crate) w_trial: Vec<f64>,
     pub(crate) residual: Vec<f64>,
     /// The last `newton::evaluate_kept` (boxed: a workspace is moved around by value).
@@ -745,6 +748,7 @@ impl Workspace {
             active: vec![true; model.ncontact() + model.njoint() + model.tendon_limits.len()],
             limit_slack_now: vec![[1.0; 2]; nlim + model.tendon_limits.len()],
             saturated: vec![None; model.ncontact()],
+            saturated_acceptable: vec![None; model.ncontact()],
             blocking: vec![false; model.ncontact() + model.joints.len()],
             shadowed: vec![false; model.ncontact()],
             matrix: BlockMatrix::new(&t.pattern),

@@ -877,6 +877,7 @@ fn solve_active(
         }
         if report.status == SolveStatus::Acceptable && acceptable.is_none() {
             ws.w_acceptable.copy_from_slice(&ws.w);
+            ws.saturated_acceptable.copy_from_slice(&ws.saturated);
             acceptable = Some(report);
         }
         restart_cold(model, state, ws);
@@ -888,6 +889,10 @@ fn solve_active(
     }
     if let Some(best) = acceptable.filter(|_| !report.status.is_success()) {
         std::mem::swap(&mut ws.w, &mut ws.w_acceptable);
+        // with its friction holds: a candidate held apart (`Hold::Separated`) in the acceptable
+        // attempt has `ξ₂:₃ = η₁ = 0` there, outside its slip cone once released (the retries
+        // release every such hold), and a singular complementarity block at the gradient point
+        ws.saturated.copy_from_slice(&ws.saturated_acceptable);
         // recompute the derived quantities (next poses, residual) of the restored iterate
         evaluate(model, state, ws, false, 0.0);
         report = best;
