@@ -139,15 +139,11 @@ fn the_pandas_finger_pad_stalls_end_early_on_the_same_states() {
     // stalled attempts end at `stall_iter`, seeds 4, 10 and 13 stall in 1, 2 and 2 steps,
     // 2135 → 2045, 1843 → 1707 and 2238 → 2113 iterations).
     // Every step of the runs without the early stop is also solved from the same state with it
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models/panda.xml");
-    if !path.exists() {
-        eprintln!("skipped: {} not found", path.display());
-        return;
-    }
     // (friction cones judged by their whole Jordan product, whose vector part stalls there,
     // and the pads' friction kept: held at zero, the pads no longer stall in these runs)
-    let early = workload::load(path.to_str().unwrap());
+    let Some(early) = workload::shared("panda") else {
+        return;
+    };
     let mut o = early.options.clone();
     o.cone_gap = false;
     o.drop_redundant_friction = false;

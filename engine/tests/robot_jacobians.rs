@@ -8,13 +8,9 @@ use ukemi_engine::{Coordinates, Linearization, Workspace, Wrt, step};
 
 #[test]
 fn every_converged_panda_step_has_jacobians() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models/panda.xml");
-    if !path.exists() {
-        eprintln!("skipped: {} not found", path.display());
+    let Some(model) = workload::shared("panda") else {
         return;
-    }
-    let model = workload::load(path.to_str().unwrap());
+    };
     let mut linearised = 0;
     // (`step_bench` seeds; seed 10's step 250 ended an acceptable attempt with a candidate held
     // apart, whose hold the retries had released: a singular Newton matrix at the solution)

@@ -33,13 +33,9 @@ fn stalled_attempts_end_early_and_the_steps_still_converge() {
     // the shared Panda, Table V workload with `step_bench`'s seed-1 controls: its step 162
     // (finger pads sliding on the floor) stalls at step lengths of 1e-3 in every attempt of
     // the retry ladder, 566 iterations without the early end
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models/panda.xml");
-    if !path.exists() {
-        eprintln!("skipped: {} not found", path.display());
+    let Some(early) = workload::shared("panda") else {
         return;
-    }
-    let early = workload::load(path.to_str().unwrap());
+    };
     assert_eq!(early.options.stall_iter, 20);
     let mut o = early.options.clone();
     o.stall_iter = 0;

@@ -12,6 +12,19 @@ pub fn load(path: &str) -> Model {
     model.with_options(opts).unwrap()
 }
 
+/// `../shared/models/NAME.xml` loaded as [`load`] does, or `None` (with a note on stderr) where
+/// the shared folder is absent: the tests that read it skip then.
+#[allow(dead_code)] // (the tests' helper: the examples take a path)
+pub fn shared(name: &str) -> Option<Model> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(format!("../../shared/models/{name}.xml"));
+    if !path.exists() {
+        eprintln!("skipped: {} not found", path.display());
+        return None;
+    }
+    Some(load(path.to_str()?))
+}
+
 /// The state at the model's first keyframe, else at `qpos0` at rest.
 pub fn start_state(model: &Model) -> State {
     let mut state = State::reference(model);
