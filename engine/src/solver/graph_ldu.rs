@@ -25,8 +25,8 @@ use std::collections::BTreeSet;
 use std::ops::Range;
 
 use super::dense::{
-    gemm_sub, gemv_add, gemv_sub, gemv_t_sub, lu_factor, lu_solve, lu_solve_left_matrix,
-    lu_solve_transpose,
+    copy_small, gemm_sub, gemv_add, gemv_sub, gemv_t_sub, lu_factor, lu_solve,
+    lu_solve_left_matrix, lu_solve_transpose,
 };
 
 /// One elimination step: the node eliminated and where its data lives.
@@ -774,7 +774,7 @@ impl BlockMatrix {
             let (dk, rows) = (s.dim, s.row..s.row + s.dim);
             let piv = &self.pivots[rows.clone()];
             lu_solve(&self.values[s.diag..], dk, piv, &mut b[rows.clone()]);
-            z[..dk].copy_from_slice(&b[rows]);
+            copy_small(z, &b[rows], dk);
             for nb in p.nbrs[s.nbrs.clone()].iter().filter(|nb| self.nz[nb.jk_id]) {
                 let yi = &mut b[nb.row..nb.row + nb.dim];
                 gemv_sub(yi, &self.values[nb.jk..], &z[..dk], nb.dim, dk);
@@ -783,12 +783,12 @@ impl BlockMatrix {
         // Backward, Ũ x = z: x_k = z_k - Σ_{later j} U_kj x_j.
         for s in self.live.steps.iter().rev().map(|&k| &p.steps[k]) {
             let (dk, rows) = (s.dim, s.row..s.row + s.dim);
-            z[..dk].copy_from_slice(&b[rows.clone()]);
+            copy_small(z, &b[rows.clone()], dk);
             for nb in p.nbrs[s.nbrs.clone()].iter().filter(|nb| self.nz[nb.kj_id]) {
                 let xj = &b[nb.row..nb.row + nb.dim];
                 gemv_sub(&mut z[..dk], &self.values[nb.kj..], xj, dk, nb.dim);
             }
-            b[rows].copy_from_slice(&z[..dk]);
+            copy_small(&mut b[rows], z, dk);
         }
     }
 
@@ -804,7 +804,7 @@ impl BlockMatrix {
         // Forward, Ũᵀ w = b: w_k = y_k, then y_j -= U_kjᵀ w_k for later j.
         for s in self.live.steps.iter().map(|&k| &p.steps[k]) {
             let (dk, rows) = (s.dim, s.row..s.row + s.dim);
-            w[..dk].copy_from_slice(&b[rows]);
+            copy_small(w, &b[rows], dk);
             for nb in p.nbrs[s.nbrs.clone()].iter().filter(|nb| self.nz[nb.kj_id]) {
                 let yj = &mut b[nb.row..nb.row + nb.dim];
                 gemv_t_sub(yj, &self.values[nb.kj..], &w[..dk], dk, nb.dim);
@@ -813,14 +813,14 @@ impl BlockMatrix {
         // Backward, L̃ᵀ x = w: x_k = D_k⁻ᵀ (w_k - Σ_{later i} A_ikᵀ x_i).
         for s in self.live.steps.iter().rev().map(|&k| &p.steps[k]) {
             let (dk, rows) = (s.dim, s.row..s.row + s.dim);
-            w[..dk].copy_from_slice(&b[rows.clone()]);
+            copy_small(w, &b[rows.clone()], dk);
             for nb in p.nbrs[s.nbrs.clone()].iter().filter(|nb| self.nz[nb.jk_id]) {
                 let xi = &b[nb.row..nb.row + nb.dim];
                 gemv_t_sub(&mut w[..dk], &self.values[nb.jk..], xi, nb.dim, dk);
             }
             let piv = &self.pivots[rows.clone()];
             lu_solve_transpose(&self.values[s.diag..], dk, piv, &mut w[..dk]);
-            b[rows].copy_from_slice(&w[..dk]);
+            copy_small(&mut b[rows], w, dk);
         }
     }
 
