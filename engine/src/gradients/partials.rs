@@ -11,10 +11,12 @@
 //! residual), `∂Y/∂w` per body velocity.
 //! **Column by column**: one full residual evaluation per column and sign, the reference the
 //! tests compare the coloured partials against.
+use std::sync::Arc;
+
 use nalgebra::DMatrix;
 
 use super::light::{Light, light_column};
-use super::sparsity::{Interactions, Support, colour, transmission_bodies};
+use super::sparsity::{Interactions, Support, colour, neighbours, transmission_bodies};
 use super::tangent::{Coordinates, Point};
 use super::{FD_STEP, next_state_into};
 use crate::contact::Frozen;
@@ -37,7 +39,7 @@ pub enum PartialsMethod {
 }
 
 /// One input direction of the step.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) enum Input {
     State(usize),
     Ctrl(usize),
@@ -50,29 +52,36 @@ pub(super) struct Partials {
     /// range, at `r_z[r_start[c]..r_start[c + 1]]` (a dense `nw × nz` matrix was mostly the
     /// zero rows of inactive contact candidates: 8400 × 48 on the A1).
     r_z: Vec<f64>,
-    r_start: Vec<usize>,
+    r_start: Arc<Vec<usize>>,
     /// `∂Y/∂z`, `ny × nz`.
     pub y_z: DMatrix<f64>,
     /// `∂Y/∂w` on the columns `w_cols`, `ny × w_cols.len()` (the other columns are zero).
     pub y_w: DMatrix<f64>,
     /// Row ranges `(start, len)` of `w` where each column of `r_z` can be non-zero.
-    pub rows: Vec<Vec<(usize, usize)>>,
+    pub rows: Arc<Vec<Vec<(usize, usize)>>>,
     /// Columns of `w` that `Y` depends on (the body velocities, 6 per moving body).
     pub w_cols: Vec<usize>,
     /// Residual evaluations spent.
     pub evaluations: usize,
 }
 
+/// Where each column's entries start in `Partials::r_z` for the supports `rows`, and the
+/// total as the last entry.
+fn column_starts(rows: &[Vec<(usize, usize)>]) -> Vec<usize> {
+    let mut starts = Vec::with_capacity(rows.len() + 1);
+    let mut n = 0;
+    for rows in rows {
+        starts.push(n);
+        n += rows.iter().map(|&(_, l)| l).sum::<usize>();
+    }
+    starts.push(n);
+    starts
+}
+
 impl Partials {
-    /// Size `r_z` for the supports in `rows`, zero.
+    /// Size `r_z` for the column starts `r_start`, zero.
     fn allocate_r_z(&mut self) {
-        self.r_start.clear();
-        let mut n = 0;
-        for rows in &self.rows {
-            self.r_start.push(n);
-            n += rows.iter().map(|&(_, l)| l).sum::<usize>();
-        }
-        self.r_start.push(n);
+        let n = self.r_start.last().copied().unwrap_or(0);
         self.r_z.clear();
         self.r_z.resize(n, 0.0);
     }
@@ -368,30 +377,22 @@ fn steps(model: &Model, inputs: &[Input]) -> Vec<f64> {
         .collect()
 }
 
-/// Row supports of every input column, and whether the column is light: it changes current
-/// velocities or controls only, so its rows are body rows, taken in closed form ([`super::light`]).
-fn supports(model: &Model, probe: &Probe, inputs: &[Input]) -> (Vec<Support>, Vec<bool>) {
-    let graph = Interactions::new(model, &probe.ws.active);
+/// Row supports of the columns that are not light at the activation `active` (a light
+/// column's rows come from the skeleton; its entry here is empty).
+fn supports(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> Vec<Support> {
+    let graph = Interactions::new(model, &sk.neighbours, active);
     let all: Vec<usize> = (1..model.nbody()).collect();
-    let below = subtrees(model);
-    let mut light = vec![false; inputs.len()];
-    let sup = inputs
-        .iter()
-        .enumerate()
-        .map(|(c, input)| match *input {
-            Input::State(i) => {
-                let (touched, moved) = state_bodies(model, probe.point.coords, &below, i);
-                if moved.is_empty() {
-                    light[c] = true;
-                    return Support::body_rows(&graph, &touched);
-                }
-                Support::new(model, &graph, &touched, &moved, &[], &moved)
+    let mut sup: Vec<Support> = Vec::with_capacity(inputs.len());
+    for (c, input) in inputs.iter().enumerate() {
+        let s = match *input {
+            _ if sk.light[c] => Support::default(),
+            // the dofs of one joint move the same bodies
+            Input::State(_) if sk.same_as[c] < c => sup[sk.same_as[c]].clone(),
+            Input::State(_) => {
+                let (touched, moved) = &sk.bodies[c];
+                Support::new(model, &graph, touched, moved, &[], moved)
             }
-            Input::Ctrl(i) => {
-                light[c] = true;
-                let bodies = transmission_bodies(model, &model.actuators[i].transmission);
-                Support::body_rows(&graph, &bodies)
-            }
+            Input::Ctrl(_) => unreachable!("control columns are light"),
             Input::Param(p) => match p {
                 Param::Mass(b) | Param::Inertia(b, _, _) => {
                     Support::new(model, &graph, &[b], &[], &[], &[])
@@ -407,9 +408,95 @@ fn supports(model: &Model, probe: &Probe, inputs: &[Input]) -> (Vec<Support>, Ve
                 Param::Gravity(_) => Support::new(model, &graph, &all, &[], &[], &[]),
                 Param::Timestep => Support::everything(model),
             },
-        })
-        .collect();
-    (sup, light)
+        };
+        sup.push(s);
+    }
+    sup
+}
+
+/// The part of a [`Plan`] the contact activation does not change: which columns are light
+/// (they change current velocities or controls only, so their rows are body rows, taken in
+/// closed form by [`super::light`]), their rows and groups, the bodies each state column
+/// touches and moves, and the output map's plan.
+struct Skeleton {
+    light: Vec<bool>,
+    /// Per state column, the bodies it touches and moves ([`state_bodies`]); empty otherwise.
+    bodies: Vec<(Vec<usize>, Vec<usize>)>,
+    /// Per column, the first state column with the same bodies (itself if none before).
+    same_as: Vec<usize>,
+    /// [`neighbours`].
+    neighbours: Vec<Vec<usize>>,
+    /// The light columns' row ranges (empty for the others).
+    light_rows: Vec<Vec<(usize, usize)>>,
+    light_groups: Vec<Vec<usize>>,
+    output: Arc<OutputPlan>,
+}
+
+impl Skeleton {
+    fn new(model: &Model, coords: Coordinates, inputs: &[Input]) -> Skeleton {
+        let nbrs = neighbours(model);
+        // the body neighbours alone (no contact candidate links bodies)
+        let graph = Interactions::new(model, &nbrs, &vec![false; model.ncontact()]);
+        let below = subtrees(model);
+        let mut light = vec![false; inputs.len()];
+        let mut bodies = vec![(Vec::new(), Vec::new()); inputs.len()];
+        let mut light_sup = vec![Support::default(); inputs.len()];
+        for (c, input) in inputs.iter().enumerate() {
+            match *input {
+                Input::State(i) => {
+                    let (touched, moved) = state_bodies(model, coords, &below, i);
+                    if moved.is_empty() {
+                        light[c] = true;
+                        light_sup[c] = Support::body_rows(&graph, &touched);
+                    }
+                    bodies[c] = (touched, moved);
+                }
+                Input::Ctrl(i) => {
+                    light[c] = true;
+                    let touched = transmission_bodies(model, &model.actuators[i].transmission);
+                    light_sup[c] = Support::body_rows(&graph, &touched);
+                }
+                Input::Param(_) => {}
+            }
+        }
+        // (their velocity columns coloured apart for the forward kinematics they share)
+        let light_groups = coloured_columns(&light_sup, |c| light[c], model);
+        let moved: Vec<&[usize]> = bodies.iter().map(|(_, m)| m.as_slice()).collect();
+        let same_as = (0..inputs.len())
+            .map(|c| match inputs[c] {
+                Input::State(_) => (0..c)
+                    .find(|&k| matches!(inputs[k], Input::State(_)) && bodies[k] == bodies[c])
+                    .unwrap_or(c),
+                _ => c,
+            })
+            .collect();
+        Skeleton {
+            neighbours: nbrs,
+            same_as,
+            light_rows: light_sup
+                .iter()
+                .map(|s| node_rows(model, &s.nodes))
+                .collect(),
+            light_groups,
+            output: Arc::new(OutputPlan::new(model, coords, inputs, Some(&moved))),
+            light,
+            bodies,
+        }
+    }
+}
+
+/// Groups of the columns `c` with `pick(c)`, pairwise disjoint in their supports `sup`.
+fn coloured_columns(
+    sup: &[Support],
+    pick: impl Fn(usize) -> bool,
+    model: &Model,
+) -> Vec<Vec<usize>> {
+    let cols: Vec<usize> = (0..sup.len()).filter(|&c| pick(c)).collect();
+    let nodes: Vec<&[usize]> = cols.iter().map(|&c| sup[c].nodes.as_slice()).collect();
+    colour(&nodes, model.topology.pattern.nnodes())
+        .into_iter()
+        .map(|g| g.into_iter().map(|k| cols[k]).collect())
+        .collect()
 }
 
 /// Row ranges of a sorted node list, adjacent ranges merged.
@@ -442,12 +529,18 @@ pub(super) fn partials(
     let eps = steps(model, inputs);
     let mut probe = Probe::new(model, point, ctrl, held);
     let nwc = 6 * (model.nbody() - 1);
+    let plan = match method {
+        PartialsMethod::Coloured => plan_for(model, point.coords, held.0, inputs),
+        PartialsMethod::ColumnByColumn => {
+            Arc::new(Plan::column_by_column(model, point.coords, inputs, nw))
+        }
+    };
     let mut out = Partials {
         r_z: Vec::new(),
-        r_start: Vec::new(),
+        r_start: plan.r_start.clone(),
         y_z: DMatrix::zeros(ny, nz),
         y_w: DMatrix::zeros(ny, nwc),
-        rows: vec![vec![(0, nw)]; nz],
+        rows: plan.rows.clone(),
         w_cols: (1..model.nbody())
             .flat_map(|b| {
                 let o = body_node(b).map_or(0, |n| model.topology.pattern.offset(n));
@@ -456,75 +549,187 @@ pub(super) fn partials(
             .collect(),
         evaluations: 0,
     };
+    out.allocate_r_z();
     // base of the output tangent: the next state at the gradient point
     let mut base_next = point.state.clone();
     next_state_into(model, &point.state, w, &mut base_next);
     let mut out_base = Point::new(model, &base_next, Coordinates::Maximal)?;
     out_base.coords = point.coords;
     out_base.state = base_next;
-    let groups: Vec<Vec<usize>> = match method {
-        PartialsMethod::ColumnByColumn => (0..nz).map(|c| vec![c]).collect(),
-        PartialsMethod::Coloured => {
-            let (sup, light) = supports(model, &probe, inputs);
-            for (c, s) in sup.iter().enumerate() {
-                out.rows[c] = node_rows(model, &s.nodes);
-            }
-            out.allocate_r_z();
-            // full columns by coloured residual evaluations, light ones in closed form (their
-            // velocity columns coloured apart for the forward kinematics they share)
-            let nnodes = model.topology.pattern.nnodes();
-            let coloured = |kind: bool| -> Vec<Vec<usize>> {
-                let cols: Vec<usize> = (0..nz).filter(|&c| light[c] == kind).collect();
-                let sub: Vec<Support> = cols.iter().map(|&c| sup[c].clone()).collect();
-                colour(&sub, nnodes)
-                    .into_iter()
-                    .map(|g| g.into_iter().map(|k| cols[k]).collect())
-                    .collect()
-            };
-            let groups = coloured(false);
-            // contacts and joints each group must refresh
-            let refresh: Vec<Refresh> = groups
-                .iter()
-                .map(|g| {
-                    let mut cs: Vec<usize> = g
-                        .iter()
-                        .flat_map(|&c| sup[c].contacts.iter().copied())
-                        .collect();
-                    cs.sort_unstable();
-                    cs.dedup();
-                    let mut touched = vec![false; model.nbody()];
-                    for b in g.iter().flat_map(|&c| &sup[c].bodies) {
-                        touched[*b] = true;
-                    }
-                    let joints = model
-                        .joints
-                        .iter()
-                        .map(|j| touched[j.parent] || touched[j.child])
-                        .collect();
-                    Refresh {
-                        contacts: cs,
-                        joints,
-                    }
-                })
-                .collect();
-            residual_columns(
-                &mut probe,
-                &mut out,
-                inputs,
-                &eps,
-                w,
-                &groups,
-                Some(&refresh),
-            );
-            light_columns(&mut probe, &mut out, inputs, &eps, &coloured(true));
-            output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, Some(&sup));
-            return Ok(out);
-        }
-    };
-    out.allocate_r_z();
-    residual_columns(&mut probe, &mut out, inputs, &eps, w, &groups, None);
-    output_partials(&mut probe, &mut out, inputs, &eps, w, &out_base, None);
+    let refresh = plan.refresh.as_deref();
+    residual_columns(&mut probe, &mut out, inputs, &eps, w, &plan.groups, refresh);
+    light_columns(&mut probe, &mut out, inputs, &eps, &plan.light_groups);
+    output_partials(
+        &mut probe,
+        &mut out,
+        inputs,
+        &eps,
+        w,
+        &out_base,
+        &plan.output,
+    );
     Ok(out)
+}
+
+/// The structure the partials' evaluations follow: each column's row support, the groups of
+/// columns perturbed together and what each group's evaluations refresh, and the same for the
+/// output map. It depends only on the topology, the coordinates, the inputs and the frozen
+/// contact activation, which consecutive steps mostly share, so each thread keeps the last
+/// few ([`plan_for`]): building it was ~9% of the humanoid's partials.
+struct Plan {
+    rows: Arc<Vec<Vec<(usize, usize)>>>,
+    r_start: Arc<Vec<usize>>,
+    /// Columns evaluated together by residual differences.
+    groups: Vec<Vec<usize>>,
+    /// What each group's evaluations refresh (coloured); `None`: everything.
+    refresh: Option<Vec<Refresh>>,
+    /// The light columns' groups (closed form, [`light_columns`]); empty column by column.
+    light_groups: Vec<Vec<usize>>,
+    output: Arc<OutputPlan>,
+}
+
+impl Plan {
+    /// Coloured: supports from the interaction graph of the activation `active`.
+    fn coloured(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> Plan {
+        let sup = supports(model, active, inputs, sk);
+        let rows: Vec<Vec<(usize, usize)>> = sup
+            .iter()
+            .zip(&sk.light_rows)
+            .enumerate()
+            .map(|(c, (s, light))| match sk.light[c] {
+                true => light.clone(),
+                false => node_rows(model, &s.nodes),
+            })
+            .collect();
+        // full columns by coloured residual evaluations, light ones in closed form
+        let groups = coloured_columns(&sup, |c| !sk.light[c], model);
+        // contacts and joints each group must refresh
+        let refresh: Vec<Refresh> = groups
+            .iter()
+            .map(|g| {
+                let mut cs: Vec<usize> = g
+                    .iter()
+                    .flat_map(|&c| sup[c].contacts.iter().copied())
+                    .collect();
+                cs.sort_unstable();
+                cs.dedup();
+                let mut touched = vec![false; model.nbody()];
+                for b in g.iter().flat_map(|&c| &sup[c].bodies) {
+                    touched[*b] = true;
+                }
+                let joints = model
+                    .joints
+                    .iter()
+                    .map(|j| touched[j.parent] || touched[j.child])
+                    .collect();
+                Refresh {
+                    contacts: cs,
+                    joints,
+                }
+            })
+            .collect();
+        Plan {
+            r_start: Arc::new(column_starts(&rows)),
+            rows: Arc::new(rows),
+            groups,
+            refresh: Some(refresh),
+            light_groups: sk.light_groups.clone(),
+            output: sk.output.clone(),
+        }
+    }
+
+    /// Column by column, every row (the reference).
+    fn column_by_column(model: &Model, coords: Coordinates, inputs: &[Input], nw: usize) -> Plan {
+        let rows = vec![vec![(0, nw)]; inputs.len()];
+        Plan {
+            r_start: Arc::new(column_starts(&rows)),
+            rows: Arc::new(rows),
+            groups: (0..inputs.len()).map(|c| vec![c]).collect(),
+            refresh: None,
+            light_groups: Vec::new(),
+            output: Arc::new(OutputPlan::new(model, coords, inputs, None)),
+        }
+    }
+}
+
+/// Plans kept per thread, most recently used first.
+const KEPT_PLANS: usize = 8;
+
+/// A kept [`Plan`], with its skeleton's key and the activation it was built for.
+type KeptPlan = (SkeletonKey, Vec<bool>, Arc<Plan>);
+
+/// What a [`Skeleton`] is built from.
+#[derive(PartialEq)]
+struct SkeletonKey {
+    topology: u64,
+    coords: Coordinates,
+    inputs: Vec<Input>,
+}
+
+thread_local! {
+    static SKELETONS: std::cell::RefCell<Vec<(SkeletonKey, Arc<Skeleton>)>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+    static PLANS: std::cell::RefCell<Vec<KeptPlan>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Move the entry at `i` to the front (most recently used).
+fn to_front<T>(kept: &mut [T], i: usize) {
+    kept[..=i].rotate_right(1);
+}
+
+/// The coloured [`Plan`] for these inputs at the activation `active`: a kept one (the Panda
+/// repeats its activation over most steps), or one built on the kept [`Skeleton`] (the
+/// humanoid's and the A1's change nearly every step).
+fn plan_for(model: &Model, coords: Coordinates, active: &[bool], inputs: &[Input]) -> Arc<Plan> {
+    let key = SkeletonKey {
+        topology: model.topology_id(),
+        coords,
+        inputs: inputs.to_vec(),
+    };
+    let kept = PLANS
+        .try_with(|p| {
+            let mut p = p.try_borrow_mut().ok()?;
+            let i = p.iter().position(|(k, a, _)| *k == key && a == active)?;
+            to_front(&mut p, i);
+            Some(p[0].2.clone())
+        })
+        .ok()
+        .flatten();
+    if let Some(plan) = kept {
+        return plan;
+    }
+    let kept = SKELETONS
+        .try_with(|s| {
+            let mut s = s.try_borrow_mut().ok()?;
+            let i = s.iter().position(|(k, _)| *k == key)?;
+            to_front(&mut s, i);
+            Some(s[0].1.clone())
+        })
+        .ok()
+        .flatten();
+    let sk = kept.unwrap_or_else(|| {
+        let sk = Arc::new(Skeleton::new(model, coords, inputs));
+        let _ = SKELETONS.try_with(|s| {
+            if let Ok(mut s) = s.try_borrow_mut() {
+                s.truncate(KEPT_PLANS - 1);
+                let key = SkeletonKey {
+                    inputs: inputs.to_vec(),
+                    ..key
+                };
+                s.insert(0, (key, sk.clone()));
+            }
+        });
+        sk
+    });
+    let plan = Arc::new(Plan::coloured(model, active, inputs, &sk));
+    let _ = PLANS.try_with(|p| {
+        if let Ok(mut p) = p.try_borrow_mut() {
+            p.truncate(KEPT_PLANS - 1);
+            p.insert(0, (key, active.to_vec(), plan.clone()));
+        }
+    });
+    plan
 }
 
 /// What one group's residual evaluations recompute: its contact candidates and its joints
@@ -660,9 +865,148 @@ fn light_columns(
     }
 }
 
+/// The joints whose output rows a group of body velocities covers, and those of them with
+/// free translations.
+type JointsCovered = (Vec<bool>, Vec<bool>);
+
+/// The structure of [`output_partials`]: which output rows each input column and each body
+/// velocity reaches, and the groups perturbed together.
+struct OutputPlan {
+    /// Output rows of each input column (empty: its `∂Y/∂z` column is zero).
+    col_rows: Vec<Vec<usize>>,
+    /// Groups of state (and time-step) columns, with the joints whose output rows they cover
+    /// when only those are recomputed (minimal coordinates, coloured).
+    z_groups: Vec<(Vec<usize>, Option<Vec<bool>>)>,
+    /// Output rows of each moving body's velocity.
+    body_rows: Vec<Vec<usize>>,
+    /// Groups of moving bodies (index `b - 1`), with the joints they cover and those of them
+    /// with free translations (coloured minimal coordinates).
+    w_groups: Vec<(Vec<usize>, Option<JointsCovered>)>,
+    /// The joint of each velocity coordinate.
+    dof_joint: Vec<usize>,
+}
+
+impl OutputPlan {
+    /// With the residual supports `sup` (coloured partials), columns and bodies whose output
+    /// rows do not overlap are grouped; without, one by one.
+    fn new(
+        model: &Model,
+        coords: Coordinates,
+        inputs: &[Input],
+        moved: Option<&[&[usize]]>,
+    ) -> Self {
+        let ny = coords.dim(model);
+        let cols: Vec<usize> = (0..inputs.len())
+            .filter(|&c| matches!(inputs[c], Input::State(_) | Input::Param(Param::Timestep)))
+            .collect();
+        // output rows of each column: those of the bodies it moves (a body's next state is its
+        // own pose stepped by its velocity in `w`; the current velocities do not enter)
+        let body_rows = output_rows(model, coords);
+        let col_rows: Vec<Support> = (0..inputs.len())
+            .map(|c| {
+                let mut nodes: Vec<usize> = match (moved, inputs[c]) {
+                    (Some(moved), Input::State(_)) => moved[c]
+                        .iter()
+                        .flat_map(|&b| body_rows[b - 1].nodes.iter().copied())
+                        .collect(),
+                    _ => (0..ny).collect(),
+                };
+                nodes.sort_unstable();
+                nodes.dedup();
+                Support {
+                    nodes,
+                    ..Support::default()
+                }
+            })
+            .collect();
+        let groups: Vec<Vec<usize>> = match moved {
+            Some(_) => {
+                let supports: Vec<&[usize]> =
+                    cols.iter().map(|&c| col_rows[c].nodes.as_slice()).collect();
+                colour(&supports, ny)
+                    .into_iter()
+                    .map(|g| g.into_iter().map(|k| cols[k]).collect())
+                    .collect()
+            }
+            None => cols.iter().map(|&c| vec![c]).collect(),
+        };
+        // the joints whose output rows a set of rows (minimal coordinates) covers
+        let dof_joint: Vec<usize> = {
+            let mut d = vec![0; model.nv];
+            for (ji, j) in model.joints.iter().enumerate().filter(|(_, j)| !j.is_loop) {
+                d[j.qvel_adr..j.qvel_adr + j.nfree()].fill(ji);
+            }
+            d
+        };
+        let joints_of = |rows: &mut dyn Iterator<Item = usize>| -> Vec<bool> {
+            let mut js = vec![false; model.njoint()];
+            for i in rows {
+                js[dof_joint[i % model.nv.max(1)]] = true;
+            }
+            js
+        };
+        let restrict = moved.is_some() && coords == Coordinates::Minimal;
+        let z_groups = groups
+            .into_iter()
+            // velocity columns: ∂Y/∂z is zero
+            .filter(|group| group.iter().any(|&c| !col_rows[c].nodes.is_empty()))
+            .map(|group| {
+                let js = restrict.then(|| {
+                    joints_of(
+                        &mut group
+                            .iter()
+                            .flat_map(|&c| col_rows[c].nodes.iter().copied()),
+                    )
+                });
+                (group, js)
+            })
+            .collect();
+        // ∂Y/∂w: bodies whose outputs do not overlap are perturbed together
+        let (rows, groups) = match moved {
+            Some(_) => {
+                let nodes: Vec<&[usize]> = body_rows.iter().map(|s| s.nodes.as_slice()).collect();
+                let groups = colour(&nodes, ny);
+                (body_rows, groups)
+            }
+            None => {
+                let all = Support {
+                    nodes: (0..ny).collect(),
+                    ..Support::default()
+                };
+                let n = model.nbody() - 1;
+                (vec![all; n], (0..n).map(|b| vec![b]).collect())
+            }
+        };
+        let w_groups = groups
+            .into_iter()
+            .map(|group| {
+                let js = restrict.then(|| {
+                    let js =
+                        joints_of(&mut group.iter().flat_map(|&b| rows[b].nodes.iter().copied()));
+                    // a joint without free translations has coordinates and rates of its
+                    // bodies' orientations and angular velocities alone: the linear velocity
+                    // components move only the rows of the joints with translations (the
+                    // others' entries are exactly zero)
+                    let translating = (0..model.njoint())
+                        .map(|ji| js[ji] && model.joints[ji].ntrans > 0)
+                        .collect();
+                    (js, translating)
+                });
+                (group, js)
+            })
+            .collect();
+        OutputPlan {
+            col_rows: col_rows.into_iter().map(|s| s.nodes).collect(),
+            z_groups,
+            body_rows: rows.into_iter().map(|s| s.nodes).collect(),
+            w_groups,
+            dof_joint,
+        }
+    }
+}
+
 /// `∂Y/∂z` (the output map alone: only state columns and the time step enter it) and `∂Y/∂w`
-/// per body velocity component. With the residual supports `sup` (coloured partials), columns
-/// and bodies whose output rows do not overlap are perturbed together; without, one by one.
+/// per body velocity component, by the groups of `plan`.
 fn output_partials(
     probe: &mut Probe,
     out: &mut Partials,
@@ -670,116 +1014,31 @@ fn output_partials(
     eps: &[f64],
     w: &[f64],
     out_base: &Point,
-    sup: Option<&[Support]>,
+    plan: &OutputPlan,
 ) {
     let model = probe.base;
     let ny = out.y_z.nrows();
     let (mut yp, mut ym) = (vec![0.0; ny], vec![0.0; ny]);
-    let cols: Vec<usize> = (0..inputs.len())
-        .filter(|&c| matches!(inputs[c], Input::State(_) | Input::Param(Param::Timestep)))
-        .collect();
-    // output rows of each column: those of the bodies it moves (a body's next state is its
-    // own pose stepped by its velocity in `w`; the current velocities do not enter)
-    let body_rows = output_rows(model, out_base.coords);
-    let col_rows: Vec<Support> = (0..inputs.len())
-        .map(|c| {
-            let mut nodes: Vec<usize> = match (sup, inputs[c]) {
-                (Some(sup), Input::State(_)) => sup[c]
-                    .bodies
-                    .iter()
-                    .flat_map(|&b| body_rows[b - 1].nodes.iter().copied())
-                    .collect(),
-                _ => (0..ny).collect(),
-            };
-            nodes.sort_unstable();
-            nodes.dedup();
-            Support {
-                nodes,
-                ..Support::default()
-            }
-        })
-        .collect();
-    let groups: Vec<Vec<usize>> = match sup {
-        Some(_) => {
-            let supports: Vec<Support> = cols.iter().map(|&c| col_rows[c].clone()).collect();
-            colour(&supports, ny)
-                .into_iter()
-                .map(|g| g.into_iter().map(|k| cols[k]).collect())
-                .collect()
-        }
-        None => cols.iter().map(|&c| vec![c]).collect(),
-    };
-    // the joints whose output rows a set of rows (minimal coordinates) covers
-    let dof_joint: Vec<usize> = {
-        let mut d = vec![0; model.nv];
-        for (ji, j) in model.joints.iter().enumerate().filter(|(_, j)| !j.is_loop) {
-            d[j.qvel_adr..j.qvel_adr + j.nfree()].fill(ji);
-        }
-        d
-    };
-    let joints_of = |rows: &mut dyn Iterator<Item = usize>| -> Vec<bool> {
-        let mut js = vec![false; model.njoint()];
-        for i in rows {
-            js[dof_joint[i % model.nv.max(1)]] = true;
-        }
-        js
-    };
-    let restrict = sup.is_some() && out_base.coords == Coordinates::Minimal;
-    for group in &groups {
-        if group.iter().all(|&c| col_rows[c].nodes.is_empty()) {
-            continue; // velocity columns: ∂Y/∂z is zero
-        }
-        let js = restrict.then(|| {
-            joints_of(
-                &mut group
-                    .iter()
-                    .flat_map(|&c| col_rows[c].nodes.iter().copied()),
-            )
-        });
+    for (group, js) in &plan.z_groups {
         for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
             probe.perturb(inputs, eps, group, sign);
             probe.output(w, out_base, js.as_deref(), y);
             probe.restore(inputs, group);
         }
         for &c in group {
-            for &i in &col_rows[c].nodes {
+            for &i in &plan.col_rows[c] {
                 out.y_z[(i, c)] = (yp[i] - ym[i]) / (2.0 * eps[c]);
             }
         }
     }
-    // ∂Y/∂w: bodies whose outputs do not overlap are perturbed together
-    let (rows, groups) = match sup {
-        Some(_) => {
-            let groups = colour(&body_rows, ny);
-            (body_rows, groups)
-        }
-        None => {
-            let all = Support {
-                nodes: (0..ny).collect(),
-                ..Support::default()
-            };
-            let n = model.nbody() - 1;
-            (vec![all; n], (0..n).map(|b| vec![b]).collect())
-        }
-    };
     let slot = |b: usize| body_node(b + 1).map_or(0, |n| model.topology.pattern.offset(n));
     let mut wp = w.to_vec();
-    for group in &groups {
-        let js = restrict
-            .then(|| joints_of(&mut group.iter().flat_map(|&b| rows[b].nodes.iter().copied())));
-        // a joint without free translations has coordinates and rates of its bodies'
-        // orientations and angular velocities alone: the linear velocity components move only
-        // the rows of the joints with translations (the others' entries are exactly zero)
-        let translating = js.as_ref().map(|js| {
-            let t: Vec<bool> = (0..model.njoint())
-                .map(|ji| js[ji] && model.joints[ji].ntrans > 0)
-                .collect();
-            t
-        });
+    for (group, restricted) in &plan.w_groups {
         for comp in 0..6 {
-            let (js, only) = match &translating {
-                Some(t) if comp < 3 => (Some(t), true),
-                _ => (js.as_ref(), false),
+            let (js, only) = match restricted {
+                Some((_, t)) if comp < 3 => (Some(t), true),
+                Some((js, _)) => (Some(js), false),
+                None => (None, false),
             };
             if only && !js.is_some_and(|t| t.contains(&true)) {
                 continue;
@@ -794,8 +1053,8 @@ fn output_partials(
                 let k = slot(b) + comp;
                 wp[k] = w[k];
                 // `w_cols` lists the moving bodies' six velocity rows in body order
-                for &i in &rows[b].nodes {
-                    if only && !js.is_some_and(|t| t[dof_joint[i % model.nv.max(1)]]) {
+                for &i in &plan.body_rows[b] {
+                    if only && !js.is_some_and(|t| t[plan.dof_joint[i % model.nv.max(1)]]) {
                         continue;
                     }
                     out.y_w[(i, 6 * b + comp)] = (yp[i] - ym[i]) / (2.0 * FD_STEP);

@@ -14,40 +14,50 @@ use crate::model::Model;
 use crate::model::Transmission;
 use crate::model::topology_body_node as body_node;
 
+/// The neighbours of each body through joints, couplings and transmissions (itself
+/// included), sorted: what the topology fixes of the interaction graph.
+pub(super) fn neighbours(model: &Model) -> Vec<Vec<usize>> {
+    let nb = model.nbody();
+    let mut nbrs: Vec<Vec<usize>> = (0..nb).map(|b| vec![b]).collect();
+    let mut link = |group: &[usize]| {
+        for &a in group.iter().filter(|&&a| a > 0) {
+            nbrs[a].extend(group.iter().filter(|&&b| b > 0));
+        }
+    };
+    for j in &model.joints {
+        link(&[j.parent, j.child]);
+    }
+    for c in &model.topology.coupling_blocks {
+        link(&c.iter().map(|&(b, _)| b).collect::<Vec<_>>());
+    }
+    for a in &model.actuators {
+        link(&transmission_bodies(model, &a.transmission));
+    }
+    for n in &mut nbrs {
+        n.sort_unstable();
+        n.dedup();
+    }
+    nbrs
+}
+
 /// Which bodies interact with which, and which active contact candidates each body and geom
 /// has.
-pub(super) struct Interactions {
-    /// Neighbours of each body through joints, couplings and transmissions (itself included),
-    /// sorted.
-    nbrs: Vec<Vec<usize>>,
+pub(super) struct Interactions<'n> {
+    /// [`neighbours`].
+    nbrs: &'n [Vec<usize>],
     /// Active contact candidates of each body.
     body_contacts: Vec<Vec<usize>>,
     /// Active contact candidates of each geom.
     pub geom_contacts: Vec<Vec<usize>>,
 }
 
-impl Interactions {
-    /// The graph of `model` with the contact candidates `active` (the activation frozen for the
-    /// linearisation: an inactive candidate's rows are constant, so it is in no support; on
-    /// the humanoid the inactive ones linked nearly every body to every other).
-    pub fn new(model: &Model, active: &[bool]) -> Interactions {
-        let nb = model.nbody();
-        let mut nbrs: Vec<Vec<usize>> = (0..nb).map(|b| vec![b]).collect();
-        let mut link = |group: &[usize]| {
-            for &a in group.iter().filter(|&&a| a > 0) {
-                nbrs[a].extend(group.iter().filter(|&&b| b > 0));
-            }
-        };
-        for j in &model.joints {
-            link(&[j.parent, j.child]);
-        }
-        for c in &model.topology.coupling_blocks {
-            link(&c.iter().map(|&(b, _)| b).collect::<Vec<_>>());
-        }
-        for a in &model.actuators {
-            link(&transmission_bodies(model, &a.transmission));
-        }
-        let mut body_contacts = vec![Vec::new(); nb];
+impl<'n> Interactions<'n> {
+    /// The graph of `model` with the body neighbours `nbrs` ([`neighbours`]) and the contact
+    /// candidates `active` (the activation frozen for the linearisation: an inactive
+    /// candidate's rows are constant, so it is in no support; on the humanoid the inactive
+    /// ones linked nearly every body to every other).
+    pub fn new(model: &Model, nbrs: &'n [Vec<usize>], active: &[bool]) -> Interactions<'n> {
+        let mut body_contacts = vec![Vec::new(); model.nbody()];
         let mut geom_contacts = vec![Vec::new(); model.geoms.len()];
         for (c, contact) in model
             .contacts
@@ -64,10 +74,6 @@ impl Interactions {
             }
             geom_contacts[contact.geom_a].push(c);
             geom_contacts[contact.geom_b].push(c);
-        }
-        for n in &mut nbrs {
-            n.sort_unstable();
-            n.dedup();
         }
         Interactions {
             nbrs,
@@ -194,13 +200,13 @@ impl Support {
 
 /// Greedy colouring: groups of columns with pairwise disjoint supports, columns with the
 /// largest supports placed first.
-pub(super) fn colour(supports: &[Support], nnodes: usize) -> Vec<Vec<usize>> {
+pub(super) fn colour(supports: &[&[usize]], nnodes: usize) -> Vec<Vec<usize>> {
     let mut order: Vec<usize> = (0..supports.len()).collect();
-    order.sort_by_key(|&c| std::cmp::Reverse(supports[c].nodes.len()));
+    order.sort_by_key(|&c| std::cmp::Reverse(supports[c].len()));
     let mut groups: Vec<Vec<usize>> = Vec::new();
     let mut used: Vec<Vec<bool>> = Vec::new();
     for c in order {
-        let nodes = &supports[c].nodes;
+        let nodes = supports[c];
         let k = match used.iter().position(|u| nodes.iter().all(|&n| !u[n])) {
             Some(k) => k,
             None => {
@@ -234,7 +240,8 @@ mod tests {
             nodes: (0..10).collect(),
             ..Support::default()
         });
-        let groups = colour(&sup, 10);
+        let nodes: Vec<&[usize]> = sup.iter().map(|s| s.nodes.as_slice()).collect();
+        let groups = colour(&nodes, 10);
         let mut seen = vec![false; sup.len()];
         for g in &groups {
             let mut used = [false; 10];

@@ -57,9 +57,19 @@ impl JointFrame {
     pub fn new(joint: &Joint, parent: &Pose, child: &Pose) -> Self {
         let rot_p = quat::rotation(&parent.quat);
         let rot_c = quat::rotation(&child.quat);
-        let rot_off = quat::rotation(&joint.offset);
-        let rot_pj = rot_p * rot_off;
-        let qj = quat::conj(&joint.offset) * quat::conj(&parent.quat) * child.quat;
+        // most joints have no offset: skip the products with the identity (bit for bit the same)
+        let plain = joint.offset == Quat::identity();
+        let (rot_off, rot_pj, qj) = if plain {
+            (
+                Matrix3::identity(),
+                rot_p,
+                quat::conj(&parent.quat) * child.quat,
+            )
+        } else {
+            let rot_off = quat::rotation(&joint.offset);
+            let qj = quat::conj(&joint.offset) * quat::conj(&parent.quat) * child.quat;
+            (rot_off, rot_p * rot_off, qj)
+        };
         let a_p = parent.pos + rot_p * joint.parent_anchor;
         let a_c = child.pos + rot_c * joint.child_anchor;
         let delta_raw = rot_pj.transpose() * (a_c - a_p);
