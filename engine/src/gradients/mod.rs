@@ -40,6 +40,7 @@ pub mod hints;
 pub mod kept;
 mod light;
 mod partials;
+mod plan;
 mod rollout;
 mod sparsity;
 mod substeps;

@@ -1,0 +1,551 @@
+//! The structure the coloured partials follow ([`super::partials`]): each input column's row
+//! support, the groups of columns perturbed together in one residual evaluation, what each
+//! group's evaluations refresh, and the same for the output map. It depends only on the
+//! topology, the coordinates, the inputs and the frozen contact activation, so each thread
+//! keeps the last few: the activation-free [`Skeleton`] per (topology, coordinates, inputs),
+//! and the whole [`Plan`] per activation too.
+use std::sync::Arc;
+
+use super::partials::Input;
+use super::sparsity::{Interactions, Support, colour, neighbours, transmission_bodies};
+use super::tangent::Coordinates;
+use crate::model::Model;
+use crate::model::params::Param;
+
+/// Where each column's entries start in `Partials::r_z` for the supports `rows`, and the
+/// total as the last entry.
+fn column_starts(rows: &[Vec<(usize, usize)>]) -> Vec<usize> {
+    let mut starts = Vec::with_capacity(rows.len() + 1);
+    let mut n = 0;
+    for rows in rows {
+        starts.push(n);
+        n += rows.iter().map(|&(_, l)| l).sum::<usize>();
+    }
+    starts.push(n);
+    starts
+}
+
+/// The bodies below each joint: its child and every body whose forward kinematics follows it
+/// (empty for a loop joint), in body order.
+pub(super) fn subtrees(model: &Model) -> Vec<Vec<usize>> {
+    let fk = &model.topology.fk_order;
+    (0..model.njoint())
+        .map(|ji| {
+            let mut below = vec![false; model.nbody()];
+            for &k in fk {
+                let j = &model.joints[k];
+                below[j.child] |= k == ji || below[j.parent];
+            }
+            (1..model.nbody()).filter(|&b| below[b]).collect()
+        })
+        .collect()
+}
+
+/// Bodies whose pose or velocity (`touched`) or pose (`moved`) a perturbation of state tangent
+/// direction `i` changes: in minimal coordinates those below the dof's joint (its coordinates
+/// move their poses and velocities, its rate their velocities), in maximal ones the direction's
+/// own body. What perturbing the state and comparing would find, known from the tree.
+pub(super) fn state_bodies(
+    model: &Model,
+    coords: Coordinates,
+    below: &[Vec<usize>],
+    i: usize,
+) -> (Vec<usize>, Vec<usize>) {
+    let (bodies, pose) = match coords {
+        Coordinates::Minimal => {
+            let nv = model.nv;
+            let ji = model.joints.iter().position(|j| {
+                !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&(i % nv))
+            });
+            (ji.map_or_else(Vec::new, |ji| below[ji].clone()), i < nv)
+        }
+        // 12 per body: position, rotation, velocity, angular velocity
+        Coordinates::Maximal => (vec![i / 12 + 1], i % 12 < 6),
+    };
+    let moved = if pose { bodies.clone() } else { Vec::new() };
+    (bodies, moved)
+}
+
+/// Row supports of the columns that are not light at the activation `active` (a light
+/// column's rows come from the skeleton; its entry here is empty).
+fn supports(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> Vec<Support> {
+    let graph = Interactions::new(model, &sk.neighbours, active);
+    let all: Vec<usize> = (1..model.nbody()).collect();
+    let mut sup: Vec<Support> = Vec::with_capacity(inputs.len());
+    for (c, input) in inputs.iter().enumerate() {
+        let s = match *input {
+            _ if sk.light[c] => Support::default(),
+            // the dofs of one joint move the same bodies
+            Input::State(_) if sk.same_as[c] < c => sup[sk.same_as[c]].clone(),
+            Input::State(_) => {
+                let (touched, moved) = &sk.bodies[c];
+                Support::new(model, &graph, touched, moved, &[], moved)
+            }
+            Input::Ctrl(_) => unreachable!("control columns are light"),
+            Input::Param(p) => match p {
+                Param::Mass(b) | Param::Inertia(b, _, _) => {
+                    Support::new(model, &graph, &[b], &[], &[], &[])
+                }
+                Param::Friction(g) | Param::Size(g, _) | Param::GeomPos(g, _) => {
+                    Support::new(model, &graph, &[], &[], &graph.geom_contacts[g], &[])
+                }
+                Param::Stiffness(j, _) | Param::Damping(j, _) => {
+                    let joint = &model.joints[j];
+                    let bodies = [joint.parent, joint.child];
+                    Support::new(model, &graph, &bodies, &[], &[], &bodies)
+                }
+                Param::Gravity(_) => Support::new(model, &graph, &all, &[], &[], &[]),
+                Param::Timestep => Support::everything(model),
+            },
+        };
+        sup.push(s);
+    }
+    sup
+}
+
+/// The part of a [`Plan`] the contact activation does not change: which columns are light
+/// (they change current velocities or controls only, so their rows are body rows, taken in
+/// closed form by [`super::light`]), their rows and groups, the bodies each state column
+/// touches and moves, and the output map's plan.
+struct Skeleton {
+    light: Vec<bool>,
+    /// Per state column, the bodies it touches and moves ([`state_bodies`]); empty otherwise.
+    bodies: Vec<(Vec<usize>, Vec<usize>)>,
+    /// Per column, the first state column with the same bodies (itself if none before).
+    same_as: Vec<usize>,
+    /// [`neighbours`].
+    neighbours: Vec<Vec<usize>>,
+    /// The light columns' row ranges (empty for the others).
+    light_rows: Vec<Vec<(usize, usize)>>,
+    light_groups: Vec<Vec<usize>>,
+    output: Arc<OutputPlan>,
+}
+
+impl Skeleton {
+    fn new(model: &Model, coords: Coordinates, inputs: &[Input]) -> Skeleton {
+        let nbrs = neighbours(model);
+        // the body neighbours alone (no contact candidate links bodies)
+        let graph = Interactions::new(model, &nbrs, &vec![false; model.ncontact()]);
+        let below = subtrees(model);
+        let mut light = vec![false; inputs.len()];
+        let mut bodies = vec![(Vec::new(), Vec::new()); inputs.len()];
+        let mut light_sup = vec![Support::default(); inputs.len()];
+        for (c, input) in inputs.iter().enumerate() {
+            match *input {
+                Input::State(i) => {
+                    let (touched, moved) = state_bodies(model, coords, &below, i);
+                    if moved.is_empty() {
+                        light[c] = true;
+                        light_sup[c] = Support::body_rows(&graph, &touched);
+                    }
+                    bodies[c] = (touched, moved);
+                }
+                Input::Ctrl(i) => {
+                    light[c] = true;
+                    let touched = transmission_bodies(model, &model.actuators[i].transmission);
+                    light_sup[c] = Support::body_rows(&graph, &touched);
+                }
+                Input::Param(_) => {}
+            }
+        }
+        // (their velocity columns coloured apart for the forward kinematics they share)
+        let light_groups = coloured_columns(&light_sup, |c| light[c], model);
+        let moved: Vec<&[usize]> = bodies.iter().map(|(_, m)| m.as_slice()).collect();
+        let same_as = (0..inputs.len())
+            .map(|c| match inputs[c] {
+                Input::State(_) => (0..c)
+                    .find(|&k| matches!(inputs[k], Input::State(_)) && bodies[k] == bodies[c])
+                    .unwrap_or(c),
+                _ => c,
+            })
+            .collect();
+        Skeleton {
+            neighbours: nbrs,
+            same_as,
+            light_rows: light_sup
+                .iter()
+                .map(|s| node_rows(model, &s.nodes))
+                .collect(),
+            light_groups,
+            output: Arc::new(OutputPlan::new(model, coords, inputs, Some(&moved))),
+            light,
+            bodies,
+        }
+    }
+}
+
+/// Groups of the columns `c` with `pick(c)`, pairwise disjoint in their supports `sup`.
+fn coloured_columns(
+    sup: &[Support],
+    pick: impl Fn(usize) -> bool,
+    model: &Model,
+) -> Vec<Vec<usize>> {
+    let cols: Vec<usize> = (0..sup.len()).filter(|&c| pick(c)).collect();
+    let nodes: Vec<&[usize]> = cols.iter().map(|&c| sup[c].nodes.as_slice()).collect();
+    colour(&nodes, model.topology.pattern.nnodes())
+        .into_iter()
+        .map(|g| g.into_iter().map(|k| cols[k]).collect())
+        .collect()
+}
+
+/// Row ranges of a sorted node list, adjacent ranges merged.
+pub(super) fn node_rows(model: &Model, nodes: &[usize]) -> Vec<(usize, usize)> {
+    let p = &model.topology.pattern;
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    let mut sorted: Vec<(usize, usize)> = nodes.iter().map(|&n| (p.offset(n), p.dim(n))).collect();
+    sorted.sort_unstable();
+    for (o, d) in sorted {
+        match out.last_mut() {
+            Some((s, l)) if *s + *l == o => *l += d,
+            _ => out.push((o, d)),
+        }
+    }
+    out
+}
+
+/// The structure the partials' evaluations follow: each column's row support, the groups of
+/// columns perturbed together and what each group's evaluations refresh, and the same for the
+/// output map. It depends only on the topology, the coordinates, the inputs and the frozen
+/// contact activation, which consecutive steps mostly share, so each thread keeps the last
+/// few ([`plan_for`]): building it was ~9% of the humanoid's partials.
+pub(super) struct Plan {
+    pub(super) rows: Arc<Vec<Vec<(usize, usize)>>>,
+    pub(super) r_start: Arc<Vec<usize>>,
+    /// Columns evaluated together by residual differences.
+    pub(super) groups: Vec<Vec<usize>>,
+    /// What each group's evaluations refresh (coloured); `None`: everything.
+    pub(super) refresh: Option<Vec<Refresh>>,
+    /// The light columns' groups (closed form, [`light_columns`]); empty column by column.
+    pub(super) light_groups: Vec<Vec<usize>>,
+    pub(super) output: Arc<OutputPlan>,
+}
+
+impl Plan {
+    /// Coloured: supports from the interaction graph of the activation `active`.
+    fn coloured(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> Plan {
+        let sup = supports(model, active, inputs, sk);
+        let rows: Vec<Vec<(usize, usize)>> = sup
+            .iter()
+            .zip(&sk.light_rows)
+            .enumerate()
+            .map(|(c, (s, light))| match sk.light[c] {
+                true => light.clone(),
+                false => node_rows(model, &s.nodes),
+            })
+            .collect();
+        // full columns by coloured residual evaluations, light ones in closed form
+        let groups = coloured_columns(&sup, |c| !sk.light[c], model);
+        // contacts and joints each group must refresh
+        let refresh: Vec<Refresh> = groups
+            .iter()
+            .map(|g| {
+                let mut cs: Vec<usize> = g
+                    .iter()
+                    .flat_map(|&c| sup[c].contacts.iter().copied())
+                    .collect();
+                cs.sort_unstable();
+                cs.dedup();
+                let mut touched = vec![false; model.nbody()];
+                for b in g.iter().flat_map(|&c| &sup[c].bodies) {
+                    touched[*b] = true;
+                }
+                let joints = model
+                    .joints
+                    .iter()
+                    .map(|j| touched[j.parent] || touched[j.child])
+                    .collect();
+                Refresh {
+                    contacts: cs,
+                    joints,
+                }
+            })
+            .collect();
+        Plan {
+            r_start: Arc::new(column_starts(&rows)),
+            rows: Arc::new(rows),
+            groups,
+            refresh: Some(refresh),
+            light_groups: sk.light_groups.clone(),
+            output: sk.output.clone(),
+        }
+    }
+
+    /// Column by column, every row (the reference).
+    pub(super) fn column_by_column(
+        model: &Model,
+        coords: Coordinates,
+        inputs: &[Input],
+        nw: usize,
+    ) -> Plan {
+        let rows = vec![vec![(0, nw)]; inputs.len()];
+        Plan {
+            r_start: Arc::new(column_starts(&rows)),
+            rows: Arc::new(rows),
+            groups: (0..inputs.len()).map(|c| vec![c]).collect(),
+            refresh: None,
+            light_groups: Vec::new(),
+            output: Arc::new(OutputPlan::new(model, coords, inputs, None)),
+        }
+    }
+}
+
+/// Plans kept per thread, most recently used first.
+const KEPT_PLANS: usize = 8;
+
+/// A kept [`Plan`], with its skeleton's key and the activation it was built for.
+type KeptPlan = (SkeletonKey, Vec<bool>, Arc<Plan>);
+
+/// What a [`Skeleton`] is built from.
+#[derive(PartialEq)]
+struct SkeletonKey {
+    topology: u64,
+    coords: Coordinates,
+    inputs: Vec<Input>,
+}
+
+thread_local! {
+    static SKELETONS: std::cell::RefCell<Vec<(SkeletonKey, Arc<Skeleton>)>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+    static PLANS: std::cell::RefCell<Vec<KeptPlan>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Move the entry at `i` to the front (most recently used).
+fn to_front<T>(kept: &mut [T], i: usize) {
+    kept[..=i].rotate_right(1);
+}
+
+/// The coloured [`Plan`] for these inputs at the activation `active`: a kept one (the Panda
+/// repeats its activation over most steps), or one built on the kept [`Skeleton`] (the
+/// humanoid's and the A1's change nearly every step).
+pub(super) fn plan_for(
+    model: &Model,
+    coords: Coordinates,
+    active: &[bool],
+    inputs: &[Input],
+) -> Arc<Plan> {
+    let key = SkeletonKey {
+        topology: model.topology_id(),
+        coords,
+        inputs: inputs.to_vec(),
+    };
+    let kept = PLANS
+        .try_with(|p| {
+            let mut p = p.try_borrow_mut().ok()?;
+            let i = p.iter().position(|(k, a, _)| *k == key && a == active)?;
+            to_front(&mut p, i);
+            Some(p[0].2.clone())
+        })
+        .ok()
+        .flatten();
+    if let Some(plan) = kept {
+        return plan;
+    }
+    let kept = SKELETONS
+        .try_with(|s| {
+            let mut s = s.try_borrow_mut().ok()?;
+            let i = s.iter().position(|(k, _)| *k == key)?;
+            to_front(&mut s, i);
+            Some(s[0].1.clone())
+        })
+        .ok()
+        .flatten();
+    let sk = kept.unwrap_or_else(|| {
+        let sk = Arc::new(Skeleton::new(model, coords, inputs));
+        let _ = SKELETONS.try_with(|s| {
+            if let Ok(mut s) = s.try_borrow_mut() {
+                s.truncate(KEPT_PLANS - 1);
+                let key = SkeletonKey {
+                    inputs: inputs.to_vec(),
+                    ..key
+                };
+                s.insert(0, (key, sk.clone()));
+            }
+        });
+        sk
+    });
+    let plan = Arc::new(Plan::coloured(model, active, inputs, &sk));
+    let _ = PLANS.try_with(|p| {
+        if let Ok(mut p) = p.try_borrow_mut() {
+            p.truncate(KEPT_PLANS - 1);
+            p.insert(0, (key, active.to_vec(), plan.clone()));
+        }
+    });
+    plan
+}
+
+/// What one group's residual evaluations recompute: its contact candidates and its joints
+/// (those of the bodies it touches).
+pub(super) struct Refresh {
+    pub(super) contacts: Vec<usize>,
+    pub(super) joints: Vec<bool>,
+}
+
+/// The joints whose output rows a group of body velocities covers, and those of them with
+/// free translations.
+type JointsCovered = (Vec<bool>, Vec<bool>);
+
+/// The structure of [`output_partials`]: which output rows each input column and each body
+/// velocity reaches, and the groups perturbed together.
+pub(super) struct OutputPlan {
+    /// Output rows of each input column (empty: its `∂Y/∂z` column is zero).
+    pub(super) col_rows: Vec<Vec<usize>>,
+    /// Groups of state (and time-step) columns, with the joints whose output rows they cover
+    /// when only those are recomputed (minimal coordinates, coloured).
+    pub(super) z_groups: Vec<(Vec<usize>, Option<Vec<bool>>)>,
+    /// Output rows of each moving body's velocity.
+    pub(super) body_rows: Vec<Vec<usize>>,
+    /// Groups of moving bodies (index `b - 1`), with the joints they cover and those of them
+    /// with free translations (coloured minimal coordinates).
+    pub(super) w_groups: Vec<(Vec<usize>, Option<JointsCovered>)>,
+    /// The joint of each velocity coordinate.
+    pub(super) dof_joint: Vec<usize>,
+}
+
+impl OutputPlan {
+    /// With the residual supports `sup` (coloured partials), columns and bodies whose output
+    /// rows do not overlap are grouped; without, one by one.
+    fn new(
+        model: &Model,
+        coords: Coordinates,
+        inputs: &[Input],
+        moved: Option<&[&[usize]]>,
+    ) -> Self {
+        let ny = coords.dim(model);
+        let cols: Vec<usize> = (0..inputs.len())
+            .filter(|&c| matches!(inputs[c], Input::State(_) | Input::Param(Param::Timestep)))
+            .collect();
+        // output rows of each column: those of the bodies it moves (a body's next state is its
+        // own pose stepped by its velocity in `w`; the current velocities do not enter)
+        let body_rows = output_rows(model, coords);
+        let col_rows: Vec<Support> = (0..inputs.len())
+            .map(|c| {
+                let mut nodes: Vec<usize> = match (moved, inputs[c]) {
+                    (Some(moved), Input::State(_)) => moved[c]
+                        .iter()
+                        .flat_map(|&b| body_rows[b - 1].nodes.iter().copied())
+                        .collect(),
+                    _ => (0..ny).collect(),
+                };
+                nodes.sort_unstable();
+                nodes.dedup();
+                Support {
+                    nodes,
+                    ..Support::default()
+                }
+            })
+            .collect();
+        let groups: Vec<Vec<usize>> = match moved {
+            Some(_) => {
+                let supports: Vec<&[usize]> =
+                    cols.iter().map(|&c| col_rows[c].nodes.as_slice()).collect();
+                colour(&supports, ny)
+                    .into_iter()
+                    .map(|g| g.into_iter().map(|k| cols[k]).collect())
+                    .collect()
+            }
+            None => cols.iter().map(|&c| vec![c]).collect(),
+        };
+        // the joints whose output rows a set of rows (minimal coordinates) covers
+        let dof_joint: Vec<usize> = {
+            let mut d = vec![0; model.nv];
+            for (ji, j) in model.joints.iter().enumerate().filter(|(_, j)| !j.is_loop) {
+                d[j.qvel_adr..j.qvel_adr + j.nfree()].fill(ji);
+            }
+            d
+        };
+        let joints_of = |rows: &mut dyn Iterator<Item = usize>| -> Vec<bool> {
+            let mut js = vec![false; model.njoint()];
+            for i in rows {
+                js[dof_joint[i % model.nv.max(1)]] = true;
+            }
+            js
+        };
+        let restrict = moved.is_some() && coords == Coordinates::Minimal;
+        let z_groups = groups
+            .into_iter()
+            // velocity columns: ∂Y/∂z is zero
+            .filter(|group| group.iter().any(|&c| !col_rows[c].nodes.is_empty()))
+            .map(|group| {
+                let js = restrict.then(|| {
+                    joints_of(
+                        &mut group
+                            .iter()
+                            .flat_map(|&c| col_rows[c].nodes.iter().copied()),
+                    )
+                });
+                (group, js)
+            })
+            .collect();
+        // ∂Y/∂w: bodies whose outputs do not overlap are perturbed together
+        let (rows, groups) = match moved {
+            Some(_) => {
+                let nodes: Vec<&[usize]> = body_rows.iter().map(|s| s.nodes.as_slice()).collect();
+                let groups = colour(&nodes, ny);
+                (body_rows, groups)
+            }
+            None => {
+                let all = Support {
+                    nodes: (0..ny).collect(),
+                    ..Support::default()
+                };
+                let n = model.nbody() - 1;
+                (vec![all; n], (0..n).map(|b| vec![b]).collect())
+            }
+        };
+        let w_groups = groups
+            .into_iter()
+            .map(|group| {
+                let js = restrict.then(|| {
+                    let js =
+                        joints_of(&mut group.iter().flat_map(|&b| rows[b].nodes.iter().copied()));
+                    // a joint without free translations has coordinates and rates of its
+                    // bodies' orientations and angular velocities alone: the linear velocity
+                    // components move only the rows of the joints with translations (the
+                    // others' entries are exactly zero)
+                    let translating = (0..model.njoint())
+                        .map(|ji| js[ji] && model.joints[ji].ntrans > 0)
+                        .collect();
+                    (js, translating)
+                });
+                (group, js)
+            })
+            .collect();
+        OutputPlan {
+            col_rows: col_rows.into_iter().map(|s| s.nodes).collect(),
+            z_groups,
+            body_rows: rows.into_iter().map(|s| s.nodes).collect(),
+            w_groups,
+            dof_joint,
+        }
+    }
+}
+
+/// Output rows (as a [`Support`]'s `nodes`) that each moving body's next velocities reach:
+/// its own 12 in maximal coordinates; in minimal ones the dofs of the joints it is the parent
+/// or child of (a joint's coordinates and rates are those of its child relative to its parent).
+fn output_rows(model: &Model, coords: Coordinates) -> Vec<Support> {
+    let nv = model.nv;
+    (1..model.nbody())
+        .map(|b| {
+            let nodes = match coords {
+                Coordinates::Maximal => (12 * (b - 1)..12 * b).collect(),
+                Coordinates::Minimal => {
+                    let mut rows: Vec<usize> = model
+                        .joints
+                        .iter()
+                        .filter(|j| !j.is_loop && (j.parent == b || j.child == b))
+                        .flat_map(|j| j.qvel_adr..j.qvel_adr + j.nfree())
+                        .flat_map(|i| [i, nv + i])
+                        .collect();
+                    rows.sort_unstable();
+                    rows
+                }
+            };
+            Support {
+                nodes,
+                ..Support::default()
+            }
+        })
+        .collect()
+}
