@@ -687,3 +687,33 @@ fn jacobians_do_not_depend_on_the_previous_use_of_a_spare_workspace() {
         assert_eq!(again.3, first.3);
     }
 }
+
+/// The coloured partials' structure is kept per thread and reused for the same topology,
+/// coordinates, inputs and contact activation (`gradients::plan`): linearising a ball in the air
+/// (its contact inactive), then resting on the floor (active), alternating with a second model,
+/// gives what one full residual evaluation per column gives each time. A plan reused across
+/// activations would leave the resting ball's contact rows out of its supports, and its
+/// Jacobians would differ.
+#[test]
+fn kept_partial_plans_follow_the_activation_and_the_model() {
+    let ball = ball_on_floor(ContactModel::Nonlinear, 0.5);
+    let resting = settled(&ball, &[0.3, 0.1, -0.2, 0.0, 0.0, 0.5]);
+    let mut flying = resting.clone();
+    let q = ukemi_engine::qpos(&ball, &resting);
+    let mut high = q.clone();
+    high[2] += 1.0;
+    ukemi_engine::set_minimal(&ball, &mut flying, &high, &[0.3, 0.1, -0.2, 0.0, 0.0, 0.5]).unwrap();
+    let other = ball_on_floor(ContactModel::Linear, 0.5);
+    let other_resting = settled(&other, &[0.1, 0.0, -0.1, 0.0, 0.0, 0.0]);
+    for coords in [Coordinates::Minimal, Coordinates::Maximal] {
+        for (m, s) in [
+            (&ball, &flying),
+            (&ball, &resting),
+            (&other, &other_resting),
+            (&ball, &flying),
+            (&ball, &resting),
+        ] {
+            coloured_vs_reference(m, s, &[], coords, None);
+        }
+    }
+}
