@@ -145,12 +145,16 @@ pub fn step_with(
 /// The last resort of a step whose whole solve and every subdivision failed (`whole_converged`
 /// false; else `None` at once): the whole step from `start` solved again with four times the
 /// iteration budget and every candidate active in the third activation tier
-/// (`Workspace::every_candidate`), kept only if it converges without gaining energy ([`gains_energy`]); its
-/// next state and report (solution in `ws`), else `None`. The shared Panda's step 135 under
-/// Table V's random controls (fingers closing onto their limits and each other while a pad
-/// slides on the floor under ~150 N: sliding friction cones cut the step lengths to 0.01-0.3)
-/// converges in 141 iterations; random scene 701's long solves converge to energy-gaining
-/// roots and are refused.
+/// (`Workspace::every_candidate`), then, if that fails too, with every candidate active from
+/// the first attempt on; kept only if it converges without gaining energy ([`gains_energy`]);
+/// its next state and report (solution in `ws`), else `None`. The shared Panda's step 135
+/// under Table V's random controls (fingers closing onto their limits and each other while a
+/// pad slides on the floor under ~150 N: sliding friction cones cut the step lengths to
+/// 0.01-0.3) converges in 141 iterations; random scene 701's long solves converge to
+/// energy-gaining roots and are refused. The humanoid with a lower arm wedged between its
+/// waist and the floor (`tests/wedged_limb.rs`) failed every tier-by-tier attempt (~1350
+/// iterations, the long solve's tiers included) and converges in ~20 with every candidate
+/// active from the start, as it does with `activation_margin = inf`.
 pub(crate) fn long_solve(
     model: &Model,
     start: &State,
@@ -168,14 +172,25 @@ pub(crate) fn long_solve(
     })?;
     newton::prepare(&long, start, ws, ctrl, forces);
     ws.every_candidate = true;
-    let report = newton::solve(&long, start, ws);
+    let mut report = newton::solve(&long, start, ws);
     ws.every_candidate = false;
+    let mut solved_by = long;
+    if !report.status.is_success() && model.options.activation_margin.is_finite() {
+        // every candidate active from the first attempt on
+        let all = solved_by.with_options(crate::Options {
+            activation_margin: f64::INFINITY,
+            ..solved_by.options.clone()
+        })?;
+        newton::prepare(&all, start, ws, ctrl, forces);
+        report = newton::solve(&all, start, ws);
+        solved_by = all;
+    }
     if !report.status.is_success() {
         return Ok(None);
     }
     let mut next = start.clone();
-    newton::write_state(&long, &mut next, ws);
-    Ok((!gains_energy(&long, start, &next, ws)).then_some((next, report)))
+    newton::write_state(&solved_by, &mut next, ws);
+    Ok((!gains_energy(&solved_by, start, &next, ws)).then_some((next, report)))
 }
 
 /// The fewest sub-steps, a power of two (1: none), in which no body of the step that ended in
