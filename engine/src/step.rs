@@ -145,9 +145,9 @@ pub fn step_with(
 /// The last resort of a step whose whole solve and every subdivision failed (`whole_converged`
 /// false; else `None` at once): the whole step from `start` solved again with four times the
 /// iteration budget and every candidate active in the third activation tier
-/// (`Workspace::every_candidate`), then, if that fails too, with every candidate active from
-/// the first attempt on; kept only if it converges without gaining energy ([`gains_energy`]);
-/// its next state and report (solution in `ws`), else `None`. The shared Panda's step 135
+/// (`Workspace::every_candidate`), then, if that fails (or gains energy, [`gains_energy`]),
+/// with every candidate active from the first attempt on. Its next state and report (solution
+/// in `ws`, the iterations of both), else `None`. The shared Panda's step 135
 /// under Table V's random controls (fingers closing onto their limits and each other while a
 /// pad slides on the floor under ~150 N: sliding friction cones cut the step lengths to
 /// 0.01-0.3) converges in 141 iterations; random scene 701's long solves converge to
@@ -166,31 +166,39 @@ pub(crate) fn long_solve(
     if whole_converged {
         return Ok(None);
     }
-    let long = model.with_options(crate::Options {
-        max_iter: 4 * model.options.max_iter,
-        ..model.options.clone()
-    })?;
-    newton::prepare(&long, start, ws, ctrl, forces);
-    ws.every_candidate = true;
-    let mut report = newton::solve(&long, start, ws);
-    ws.every_candidate = false;
-    let mut solved_by = long;
-    if !report.status.is_success() && model.options.activation_margin.is_finite() {
-        // every candidate active from the first attempt on
-        let all = solved_by.with_options(crate::Options {
-            activation_margin: f64::INFINITY,
-            ..solved_by.options.clone()
+    let o = &model.options;
+    // in turn, until one converges to a root that gains no energy: the activation tiers with
+    // every candidate in the third, then every candidate active from the first attempt on
+    let margins: &[f64] = match o.activation_margin.is_finite() {
+        true => &[o.activation_margin, f64::INFINITY],
+        false => &[f64::INFINITY],
+    };
+    let mut spent = 0;
+    for &activation_margin in margins {
+        let long = model.with_options(crate::Options {
+            max_iter: 4 * o.max_iter,
+            activation_margin,
+            ..o.clone()
         })?;
-        newton::prepare(&all, start, ws, ctrl, forces);
-        report = newton::solve(&all, start, ws);
-        solved_by = all;
+        newton::prepare(&long, start, ws, ctrl, forces);
+        ws.every_candidate = true;
+        let report = newton::solve(&long, start, ws);
+        ws.every_candidate = false;
+        spent += report.iterations;
+        if !report.status.is_success() {
+            continue;
+        }
+        let mut next = start.clone();
+        newton::write_state(&long, &mut next, ws);
+        if !gains_energy(&long, start, &next, ws) {
+            let report = StepReport {
+                iterations: spent,
+                ..report
+            };
+            return Ok(Some((next, report)));
+        }
     }
-    if !report.status.is_success() {
-        return Ok(None);
-    }
-    let mut next = start.clone();
-    newton::write_state(&solved_by, &mut next, ws);
-    Ok((!gains_energy(&solved_by, start, &next, ws)).then_some((next, report)))
+    Ok(None)
 }
 
 /// The fewest sub-steps, a power of two (1: none), in which no body of the step that ended in
