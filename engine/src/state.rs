@@ -359,7 +359,7 @@ pub struct IterationRecord {
     pub condition: f64,
 }
 
-/// Scratch memory for [`crate::step`], allocated once per model and reused (no allocation in
+/// Scratch memory for [`crate::step()`], allocated once per model and reused (no allocation in
 /// steady state).
 pub struct Workspace {
     pub(crate) matrix: BlockMatrix,

@@ -11,7 +11,7 @@
 //! same tolerance, so its result is the same to within that tolerance (not bit for bit) as a
 //! cold start's. Given the same sequence of calls the results are the same bits (hints are
 //! read, never consumed). [`set_enabled`]`(false)` makes every flat step start cold. At most
-//! [`BUDGET`] bytes are held; the oldest go first.
+//! `BUDGET` bytes are held; the oldest go first.
 use std::collections::{HashMap, VecDeque};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};

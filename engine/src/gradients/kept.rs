@@ -3,8 +3,8 @@
 //! Under differentiation JAX and torch call a rollout (or a step) and later its VJP with the
 //! same inputs (`x0`, `us`, the model); the VJP would solve every step again. A rollout or step
 //! made with `keep` stores its states and solutions here under those inputs, bit for bit, and
-//! [`take`] hands them to the VJP, which then only linearises (a rollout's steps all at once on
-//! the thread pool). At most [`BUDGET`] bytes are held; the oldest go first.
+//! `take` hands them to the VJP, which then only linearises (a rollout's steps all at once on
+//! the thread pool). At most `BUDGET` bytes are held; the oldest go first.
 use std::collections::VecDeque;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};

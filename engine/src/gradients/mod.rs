@@ -230,7 +230,7 @@ fn finish_solve(
     Ok((next, report, central, ws))
 }
 
-/// [`crate::step`] followed by the move to the central path at `kappa`: the smoothed step map
+/// [`crate::step()`] followed by the move to the central path at `kappa`: the smoothed step map
 /// whose derivatives `kappa_grad = Some(kappa)` returns. Writes the smoothed next state. A step
 /// whose whole solve fails is reported as not converged (its sub-steps' smoothed maps are
 /// chained along the hard sub-steps, which no single smoothed map of the step reproduces).
@@ -758,7 +758,7 @@ fn check_tangents(tangents: [(&[f64], usize); 3]) -> Result<()> {
 }
 
 /// A solved step linearised at its gradient point (see the module docs). A step whose whole
-/// solve failed and that [`crate::step`] took as `n` sub-steps (`Options::max_subdivisions`)
+/// solve failed and that [`crate::step()`] took as `n` sub-steps (`Options::max_subdivisions`)
 /// is linearised sub-step by sub-step and chained (`substeps.rs`), so its gradients are those
 /// of the step the simulation actually took.
 pub struct Linearization(Kind);
@@ -872,7 +872,7 @@ impl Linearization {
             Kind::Substeps(l) => l.into_workspace(),
         }
     }
-    /// The hard next state (what [`crate::step`] returns).
+    /// The hard next state (what [`crate::step()`] returns).
     pub fn next_state(&self) -> &State {
         match &self.0 {
             Kind::Whole(l) => l.next_state(),
