@@ -189,7 +189,7 @@ fn coloured_columns(
 }
 
 /// Row ranges of a sorted node list, adjacent ranges merged.
-pub(super) fn node_rows(model: &Model, nodes: &[usize]) -> Vec<(usize, usize)> {
+fn node_rows(model: &Model, nodes: &[usize]) -> Vec<(usize, usize)> {
     let p = &model.topology.pattern;
     let mut out: Vec<(usize, usize)> = Vec::new();
     let mut sorted: Vec<(usize, usize)> = nodes.iter().map(|&n| (p.offset(n), p.dim(n))).collect();
