@@ -170,17 +170,14 @@ impl Point {
                 integrate_qpos(model, qpos, &dq[..nv]);
                 // only the joints whose coordinates move, and those below them, are recomputed
                 // (`out` holds this point's forward kinematics)
-                let changed: Vec<bool> = model
-                    .joints
-                    .iter()
-                    .map(|j| {
-                        eps != 0.0
-                            && (j.qvel_adr..j.qvel_adr + j.nfree())
-                                .any(|i| dir[i] != 0.0 || dir[nv + i] != 0.0)
-                    })
-                    .collect();
+                let changed = |ji: usize| {
+                    let j = &model.joints[ji];
+                    eps != 0.0
+                        && (j.qvel_adr..j.qvel_adr + j.nfree())
+                            .any(|i| dir[i] != 0.0 || dir[nv + i] != 0.0)
+                };
                 // inputs were validated when the point was made; perturbations stay finite
-                let _ = set_minimal_changed(model, out, qpos, qvel, &changed);
+                set_minimal_changed(model, out, qpos, qvel, &changed);
             }
             Coordinates::Maximal => {
                 for b in 1..model.nbody() {

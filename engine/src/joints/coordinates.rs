@@ -136,19 +136,18 @@ pub fn set_minimal(model: &Model, state: &mut State, qpos: &[f64], qvel: &[f64])
 }
 
 /// [`set_minimal`] for a `state` that already holds the forward kinematics of coordinates that
-/// differ from `(qpos, qvel)` only at the joints flagged in `changed`: only those joints and the
-/// joints below them are recomputed (bitwise what [`set_minimal`] computes for them; the rest
-/// is left as it is). The gradients' partials perturb a few coordinates at a time.
+/// differ from `(qpos, qvel)` only at the joints `changed(j)`: only those joints and the joints
+/// below them are recomputed (bitwise what [`set_minimal`] computes for them; the rest is left
+/// as it is). Not validated: for coordinates near ones [`validate_minimal`] accepted (the
+/// gradients' partials perturb a few coordinates at a time, ~30 times per linearisation).
 pub(crate) fn set_minimal_changed(
     model: &Model,
     state: &mut State,
     qpos: &[f64],
     qvel: &[f64],
-    changed: &[bool],
-) -> Result<()> {
-    validate_minimal(model, qpos, qvel)?;
+    changed: &dyn Fn(usize) -> bool,
+) {
     forward_kinematics(model, state, qpos, qvel, Some(changed));
-    Ok(())
 }
 
 fn forward_kinematics(
@@ -156,14 +155,14 @@ fn forward_kinematics(
     state: &mut State,
     qpos: &[f64],
     qvel: &[f64],
-    changed: Option<&[bool]>,
+    changed: Option<&dyn Fn(usize) -> bool>,
 ) {
     // bodies recomputed so far (their child joints must follow)
     let mut moved = changed.map(|_| vec![false; model.nbody()]);
     for &ji in &model.topology.fk_order {
         let j = &model.joints[ji];
         if let (Some(changed), Some(moved)) = (changed, moved.as_mut()) {
-            if !changed[ji] && !moved[j.parent] {
+            if !changed(ji) && !moved[j.parent] {
                 continue;
             }
             moved[j.child] = true;
