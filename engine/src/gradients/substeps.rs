@@ -68,9 +68,34 @@ impl StoredSubsteps {
 /// `whole`): kept when it converged and is not [`suspect`] (gained energy, or turned a body
 /// further than `max_step_rotation`), else taken as
 /// sub-steps when `max_subdivisions` allows and a subdivision succeeds, else kept if it
-/// converged, else an error. A kept whole step's solution is in `ws` (as after its solve) and
+/// converged, else (with `drop_redundant_friction`) all of that again on the exact problem,
+/// else an error. A kept whole step's solution is in `ws` (as after its solve) and
 /// in the returned [`StoredSolution`].
 pub(crate) fn retry(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    ctrl: &[f64],
+    whole: StepReport,
+) -> Result<StoredStep> {
+    let error = match attempts(model, state, ws, ctrl, whole) {
+        Err(e) if model.options.drop_redundant_friction => e,
+        kept => return kept,
+    };
+    // as `crate::step` does last of all: the exact problem, without the friction that
+    // `drop_redundant_friction` holds (its solution then holds none of it, and is linearised
+    // as such)
+    let exact = model.with_options(crate::Options {
+        drop_redundant_friction: false,
+        ..model.options.clone()
+    })?;
+    newton::prepare(&exact, state, ws, ctrl, &AppliedForces::default());
+    let report = newton::solve(&exact, state, ws);
+    attempts(&exact, state, ws, ctrl, report).map_err(|_| error)
+}
+
+/// [`retry`] with the options of `model` only.
+fn attempts(
     model: &Model,
     state: &State,
     ws: &mut Workspace,

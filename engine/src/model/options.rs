@@ -89,7 +89,8 @@ pub struct Options {
     /// attempt, the friction of active candidates at least 1 mm apart while their gap stays
     /// open (`solver::saturation::hold_separated`): apart, a contact has no friction, and its
     /// slip member turning with the velocities cut the first iterations (Table V, same states:
-    /// A1 −14..−18% iterations, humanoid −5..−9%).
+    /// A1 −14..−18% iterations, humanoid −5..−9%). A step that fails every attempt with these
+    /// shortcuts is taken once more without them (`step::step_with`).
     pub drop_redundant_friction: bool,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
