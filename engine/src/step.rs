@@ -91,7 +91,7 @@ pub fn step_with(
         return Ok(report);
     }
     // last of all, the exact problem: no friction held by `drop_redundant_friction`'s
-    // shortcuts (the humanoid's seed-13 step 127, `tests/folded_leg.rs`, fails every attempt
+    // shortcuts (the humanoid's seed-13 step 127, `tests/hard_steps.rs`, fails every attempt
     // with them and converges without)
     let exact = model.with_options(crate::Options {
         drop_redundant_friction: false,
@@ -187,7 +187,7 @@ fn attempts(
 /// pad slides on the floor under ~150 N: sliding friction cones cut the step lengths to
 /// 0.01-0.3) converges in 141 iterations; random scene 701's long solves converge to
 /// energy-gaining roots and are refused. The humanoid with a lower arm wedged between its
-/// waist and the floor (`tests/wedged_limb.rs`) failed every tier-by-tier attempt (~1350
+/// waist and the floor (`tests/hard_steps.rs`) failed every tier-by-tier attempt (~1350
 /// iterations, the long solve's tiers included) and converges in ~20 with every candidate
 /// active from the start, as it does with `activation_margin = inf`.
 pub(crate) fn long_solve(

@@ -1,0 +1,96 @@
+//! Steps that fail every ordinary attempt and converge through a step's last resorts
+//! (`step::long_solve`, then the exact problem without `drop_redundant_friction`'s shortcuts).
+#[allow(dead_code)]
+#[path = "../examples/common/workload.rs"]
+mod workload;
+use ukemi_engine::{
+    Coordinates, Linearization, Model, State, Workspace, Wrt, qpos, qvel, set_minimal, step,
+};
+
+/// The shared humanoid (or `None` without `../shared`) after `steps` steps of `step_bench`'s
+/// controls of `seed`, each converged, and the controls of the next step.
+fn replay(seed: u64, steps: usize) -> Option<(Model, State, Vec<f64>)> {
+    let model = workload::shared("humanoid")?;
+    let mut state = workload::start_state(&model);
+    let mut ws = Workspace::new(&model);
+    let mut controls = workload::Controls::with_seed(seed);
+    for _ in 0..steps {
+        let u = controls.next(&model);
+        let report = step(&model, &mut state, &mut ws, &u).unwrap();
+        assert!(report.status.is_success());
+    }
+    let u = controls.next(&model);
+    Some((model, state, u))
+}
+
+/// Whether no contact of `state` sinks.
+fn assert_no_penetration(model: &Model, state: &State) {
+    let deepest = ukemi_engine::contact::signed_distances(model, state)
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
+    assert!(deepest > -1e-8, "penetration {deepest:e} m");
+}
+
+/// Seed 2's step 143, taken from the state rebuilt from its minimal coordinates (what
+/// `rollout_vjp` and the JAX layer step from): the left lower arm wedged between the waist
+/// and the floor, the right one on the left shin, five contacts at gaps ~1e-12 m. Before the
+/// all-active last resort, every attempt crawled at step lengths ~1e-3 (~1350 iterations) and
+/// the step failed; with every candidate active from the start it converges in ~20 iterations.
+#[test]
+fn a_wedged_humanoid_step_converges() {
+    let Some((model, state, u)) = replay(2, 143) else {
+        return;
+    };
+    // its Jacobians (minimal coordinates rebuild the same start and solve it the same way)
+    let mut lin = Linearization::new(
+        &model,
+        &state,
+        &u,
+        Coordinates::Minimal,
+        Wrt::STATE_CTRL,
+        Some(1e-4),
+    )
+    .unwrap();
+    let jac = lin.jacobians(&model).unwrap();
+    assert!(jac.a.iter().chain(jac.b.iter()).all(|x| x.is_finite()));
+    let mut rebuilt = state.clone();
+    set_minimal(
+        &model,
+        &mut rebuilt,
+        &qpos(&model, &state),
+        &qvel(&model, &state),
+    )
+    .unwrap();
+    let report = step(&model, &mut rebuilt, &mut Workspace::new(&model), &u).unwrap();
+    assert!(report.status.is_success(), "{report:?}");
+    assert_no_penetration(&model, &rebuilt);
+}
+
+/// Seed 13's step 127 from the exact state: the right knee at its limit, the foot folded
+/// against the thigh. Its whole solve, sub-steps and long solves all failed (~1100
+/// iterations) with the separated-friction holds of the first attempt; without them it
+/// converges (~200 iterations).
+#[test]
+fn a_folded_leg_step_converges() {
+    let Some((model, mut state, u)) = replay(13, 127) else {
+        return;
+    };
+    // the gradients' forward pass decides the same way
+    let mut lin = Linearization::new(
+        &model,
+        &state,
+        &u,
+        Coordinates::Maximal,
+        Wrt::STATE_CTRL,
+        None,
+    )
+    .unwrap();
+    let jac = lin.jacobians(&model).unwrap();
+    assert!(jac.a.iter().chain(jac.b.iter()).all(|x| x.is_finite()));
+    let report = step(&model, &mut state, &mut Workspace::new(&model), &u).unwrap();
+    assert!(report.status.is_success(), "{report:?}");
+    // the same root both ways
+    let (p, q) = (lin.next_state().pose(1).pos, state.pose(1).pos);
+    assert!((p - q).norm() < 1e-9, "{p:?} vs {q:?}");
+    assert_no_penetration(&model, &state);
+}
