@@ -104,6 +104,21 @@ def test_step_argument_errors(pend):
     assert s.time == before[2]
 
 
+@pytest.mark.parametrize("size", [1, 7, 64, 65, 500])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_entries_are_named_whatever_the_size(size, bad):
+    from ukemi._convert import as_float_array
+
+    for where in (0, size - 1):
+        v = np.ones(size)
+        v[where] = bad
+        with pytest.raises(ukemi.InputError, match=rf"`v\[{where}\]`"):
+            as_float_array("v", v)
+    # huge finite entries whose sum overflows are finite all the same
+    huge = np.full(size, 1e308)
+    np.testing.assert_array_equal(as_float_array("v", huge), huge)
+
+
 def test_state_of_another_model_is_rejected(pend, free_body):
     with pytest.raises(ukemi.ModelMismatchError):
         ukemi.step(pend, free_body.make_state())
