@@ -87,30 +87,58 @@ pub fn step_with(
 ) -> Result<StepReport> {
     validate_inputs(model, state, ws, ctrl, forces)?;
     let report = attempts(model, state, ws, ctrl, forces)?;
-    if report.status.is_success() || !model.options.drop_redundant_friction {
+    if report.status.is_success() {
         return Ok(report);
     }
-    // last of all, the exact problem: no friction held by `drop_redundant_friction`'s
-    // shortcuts (the humanoid's seed-13 step 127, `tests/hard_steps.rs`, fails every attempt
-    // with them and converges without)
-    let exact = model.with_options(crate::Options {
-        drop_redundant_friction: false,
-        ..model.options.clone()
-    })?;
-    let mut next = ws.start.clone();
-    let retry = attempts(&exact, &mut next, ws, ctrl, forces)?;
-    let iterations = report.iterations + retry.iterations;
-    if retry.status.is_success() {
-        *state = next;
-        return Ok(StepReport {
-            iterations,
-            ..retry
-        });
+    // Last resorts, in turn, from the failed step's start:
+    // * the exact problem: no friction held by `drop_redundant_friction`'s shortcuts (the
+    //   humanoid's seed-13 step 127, `tests/hard_steps.rs`, fails every attempt with them and
+    //   converges without);
+    // * the start rebuilt from its minimal coordinates (joint drift and velocities off the
+    //   joints' motion subspaces projected out, what `rollout_vjp` and the flat JAX/torch
+    //   layers step from), with each problem: the humanoid's seed-97 step 53 jams from its
+    //   exact start on every problem and converges from the rebuilt one.
+    let start = ws.start.clone();
+    let exact = match model.options.drop_redundant_friction {
+        true => Some(model.with_options(crate::Options {
+            drop_redundant_friction: false,
+            ..model.options.clone()
+        })?),
+        false => None,
+    };
+    let rebuilt = rebuilt(model, &start)?;
+    let problems = || std::iter::once(model).chain(exact.as_ref());
+    let tries = problems()
+        .skip(1)
+        .map(|m| (m, &start))
+        .chain(rebuilt.iter().flat_map(|r| problems().map(move |m| (m, r))));
+    let mut iterations = report.iterations;
+    for (m, from) in tries {
+        let mut next = from.clone();
+        let retry = attempts(m, &mut next, ws, ctrl, forces)?;
+        iterations += retry.iterations;
+        if retry.status.is_success() {
+            *state = next;
+            return Ok(StepReport {
+                iterations,
+                ..retry
+            });
+        }
     }
+    ws.start = start;
     Ok(StepReport {
         iterations,
         ..report
     })
+}
+
+/// `state` rebuilt from its minimal coordinates by forward kinematics, or `None` when that
+/// changes nothing (loose bodies, an already consistent state).
+fn rebuilt(model: &Model, state: &State) -> Result<Option<State>> {
+    use crate::joints::coordinates::{qpos, qvel, set_minimal};
+    let mut out = state.clone();
+    set_minimal(model, &mut out, &qpos(model, state), &qvel(model, state))?;
+    Ok((out != *state).then_some(out))
 }
 
 /// A step's attempts in turn: the whole step, its subdivisions, then [`long_solve`].

@@ -1,5 +1,6 @@
 //! Steps that fail every ordinary attempt and converge through a step's last resorts
-//! (`step::long_solve`, then the exact problem without `drop_redundant_friction`'s shortcuts).
+//! (`step::long_solve`, then the exact problem without `drop_redundant_friction`'s shortcuts,
+//! then both problems from the start rebuilt from its minimal coordinates).
 #[allow(dead_code)]
 #[path = "../examples/common/workload.rs"]
 mod workload;
@@ -93,4 +94,32 @@ fn a_folded_leg_step_converges() {
     let (p, q) = (lin.next_state().pose(1).pos, state.pose(1).pos);
     assert!((p - q).norm() < 1e-9, "{p:?} vs {q:?}");
     assert_no_penetration(&model, &state);
+}
+
+/// Seed 97's step 53 from the exact state: every attempt on every problem jams (a residual
+/// ~5e-6 with the barrier parameter stuck at ~6e-6, step lengths ~1e-3; ~2800 iterations),
+/// while the same step from the state rebuilt from its minimal coordinates converges. The
+/// step's last resort takes it from there, so it lands where a step from the rebuilt state
+/// lands.
+#[test]
+fn a_jammed_exact_start_is_stepped_from_its_rebuilt_state() {
+    let Some((model, mut state, u)) = replay(97, 53) else {
+        return;
+    };
+    let mut rebuilt = state.clone();
+    set_minimal(
+        &model,
+        &mut rebuilt,
+        &qpos(&model, &state),
+        &qvel(&model, &state),
+    )
+    .unwrap();
+    let report = step(&model, &mut state, &mut Workspace::new(&model), &u).unwrap();
+    assert!(report.status.is_success(), "{report:?}");
+    assert_no_penetration(&model, &state);
+    step(&model, &mut rebuilt, &mut Workspace::new(&model), &u).unwrap();
+    for b in 1..model.nbody() {
+        let (p, q) = (state.pose(b).pos, rebuilt.pose(b).pos);
+        assert!((p - q).norm() < 1e-9, "body {b}: {p:?} vs {q:?}");
+    }
 }
