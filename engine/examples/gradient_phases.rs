@@ -42,7 +42,7 @@ impl Sum {
     fn print(&self, name: &str) {
         let ms = |x: f64| 1e3 * x / self.n.max(1) as f64;
         println!(
-            "  {name:16} ms/step: solve {:7.2}  central {:7.2}  factor {:6.2}  partials {:6.2}  backsub {:6.2}  | residual evaluations/step {:.0}",
+            "  {name:16} ms/step: solve {:7.3}  central {:7.3}  factor {:6.3}  partials {:6.3}  backsub {:6.3}  | residual evaluations/step {:.0}",
             ms(self.t.solve),
             ms(self.t.central),
             ms(self.t.factor),
@@ -139,7 +139,7 @@ fn main() {
     );
     let n = steps as f64;
     println!(
-        "  plain step {:.2} ms/step, linearisation + Jacobians {:.2} ms/step (coloured)",
+        "  plain step {:.3} ms/step, linearisation + Jacobians {:.3} ms/step (coloured)",
         1e3 * plain / n,
         1e3 * with_jac / n
     );

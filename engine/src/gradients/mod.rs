@@ -472,9 +472,8 @@ impl SolveLinearization {
         ws.active.copy_from_slice(&stored.active);
         ws.saturated.copy_from_slice(&stored.saturated);
         // the features the solve ended with (`evaluate` prepares no candidate prepared here)
-        for &(c, frozen) in &stored.frozen {
-            activation::prepare_candidate_holding(model, &point.state, &mut ws, c, frozen);
-        }
+        let candidates = stored.frozen.iter().copied();
+        activation::prepare_candidates_holding(model, &point.state, &mut ws, candidates);
         newton::evaluate(model, &point.state, &mut ws, false, 0.0);
         let mut next = point.state.clone();
         newton::write_state(model, &mut next, &ws);

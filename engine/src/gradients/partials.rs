@@ -23,6 +23,7 @@ use crate::contact::Frozen;
 use crate::model::Model;
 use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
+use crate::solver::activation::prepare_candidates_holding;
 use crate::solver::newton;
 use crate::state::{Recycled, State, Workspace};
 use crate::step::AppliedForces;
@@ -262,10 +263,9 @@ impl<'a> Probe<'a> {
         let model = self.perturbed.as_ref().unwrap_or(self.base);
         newton::prepare_forces(model, &self.state, &mut self.ws, &self.ctrl, &forces);
         let active = std::mem::take(&mut self.ws.active);
-        for c in crate::solver::inequality::active_candidates(&active[..model.ncontact()]) {
-            let (state, f) = (&self.state, self.frozen[c]);
-            crate::solver::activation::prepare_candidate_holding(model, state, &mut self.ws, c, f);
-        }
+        let candidates = crate::solver::inequality::active_candidates(&active[..model.ncontact()])
+            .map(|c| (c, self.frozen[c]));
+        prepare_candidates_holding(model, &self.state, &mut self.ws, candidates);
         self.ws.active = active;
         newton::evaluate_in(model, &self.state, &mut self.ws, w, &mut self.residual, 0.0);
     }
@@ -292,11 +292,12 @@ impl<'a> Probe<'a> {
         self.ws.active[nc..].copy_from_slice(&active[nc..]);
         // the contact frames (and frozen disk rim points) of `activation::prepare`, for the
         // candidates that move
-        for &c in contacts.iter().filter(|&&c| active[c]) {
-            let f = self.frozen[c];
-            crate::solver::activation::prepare_candidate_holding(model, state, &mut self.ws, c, f);
+        let moved = contacts.iter().filter(|&&c| active[c]);
+        for &c in moved.clone() {
             self.ws.active[c] = true;
         }
+        let candidates = moved.map(|&c| (c, self.frozen[c]));
+        prepare_candidates_holding(model, state, &mut self.ws, candidates);
         newton::evaluate_in(model, state, &mut self.ws, w, &mut self.residual, 0.0);
     }
 

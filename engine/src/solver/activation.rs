@@ -204,21 +204,36 @@ pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) 
     ws.active = active;
 }
 
-/// [`prepare`] for candidate `c` alone (its contact frame at `state` with the feature chosen
-/// at the state's predicted poses, as a solve prepares it), then holding `frozen` as the
-/// feature its gap at the next poses is measured with: the one the solve ended with, which
-/// [`refreeze_disks`] may have moved after the frame was prepared. The gradients linearise a
-/// solved step so, also at perturbed states (the features are material: a rim point or a face
-/// of the geom).
-pub(crate) fn prepare_candidate_holding(
+/// [`prepare`] for each `(c, frozen)` of `candidates` (its contact frame at `state` with the
+/// feature chosen at the state's predicted poses, as a solve prepares it), then holding
+/// `frozen` as the feature its gap at the next poses is measured with: the one the solve ended
+/// with, which [`refreeze_disks`] may have moved after the frame was prepared. The gradients
+/// linearise a solved step so, also at perturbed states (the features are material: a rim
+/// point or a face of the geom). Each geom's poses are computed once per call (a box's corner
+/// candidates share their geom), bit for bit what preparing each candidate alone computes.
+pub(crate) fn prepare_candidates_holding(
     model: &Model,
     state: &State,
     ws: &mut Workspace,
-    c: usize,
-    frozen: Option<Frozen>,
+    candidates: impl IntoIterator<Item = (usize, Option<Frozen>)>,
 ) {
-    prepare_candidate_with(model, state, ws, c, &mut Default::default());
-    ws.frozen[c] = frozen;
+    let mut memo = crate::contact::BoxPairMemo::default();
+    // (geom, its poses), searched linearly: a pass touches few geoms
+    let mut posed: Vec<(usize, GeomPoses)> = Vec::new();
+    let mut poses_of = |g: usize| match posed.iter().find(|(k, _)| *k == g) {
+        Some((_, p)) => *p,
+        None => {
+            let p = GeomPoses::of(model, state, &model.geoms[g], None);
+            posed.push((g, p));
+            p
+        }
+    };
+    for (c, frozen) in candidates {
+        let contact = &model.contacts[c];
+        let (a, b) = (poses_of(contact.geom_a), poses_of(contact.geom_b));
+        prepare_candidate_at(model, ws, c, (&a, &b), &mut memo);
+        ws.frozen[c] = frozen;
+    }
 }
 
 /// [`prepare`] for candidate `c` within a pass over the candidates at `state` (`memo`: see
@@ -633,7 +648,7 @@ const DISK_REFREEZE_TOL: f64 = 1e-10;
 /// configuration is below `-DISK_REFREEZE_TOL` is re-frozen at that point (the velocity change
 /// of the step moved the lowest point away from the predicted one); returns how many were (the
 /// step must then be solved again). The contact frames stay those prepared with the first
-/// freeze; the gradients linearise the step so (`prepare_candidate_holding`).
+/// freeze; the gradients linearise the step so (`prepare_candidates_holding`).
 pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
     let mut n = 0;
     for (c, contact) in model.contacts.iter().enumerate() {
