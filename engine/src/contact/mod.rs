@@ -187,36 +187,55 @@ impl ContactFrame {
     /// From a witness and the two bodies' COM poses.
     pub fn new(w: &Witness, body_a: &Pose, body_b: &Pose) -> Self {
         let basis = basis_from_axis(&w.normal);
+        let arms = Arms::new(w, body_a, body_b);
         let mut jac = [[0.0; 12]; 3];
         for (k, row) in jac.iter_mut().enumerate() {
-            *row = velocity_row(w, body_a, body_b, &basis.column(k).into_owned());
+            *row = arms.velocity_row(&basis.column(k).into_owned());
         }
         ContactFrame { phi: w.phi, jac }
     }
 
     /// The normal row of [`ContactFrame::new`]'s Jacobian alone (the gap's gradient).
     pub fn normal_row(w: &Witness, body_a: &Pose, body_b: &Pose) -> [f64; 12] {
-        velocity_row(w, body_a, body_b, &w.normal)
+        Arms::new(w, body_a, body_b).velocity_row(&w.normal)
     }
 }
 
-/// `d · (v_a(w_a) − v_b(w_b))` at the witness points as a row in `(v, ω_body)` of a and b.
-fn velocity_row(w: &Witness, body_a: &Pose, body_b: &Pose, d: &Vector3<f64>) -> [f64; 12] {
-    let (ra, rb) = (quat::rotation(&body_a.quat), quat::rotation(&body_b.quat));
-    let (arm_a, arm_b) = (w.point_a - body_a.pos, w.point_b - body_b.pos);
-    // d · (v + R ω_b × r) = dᵀ v + (Rᵀ (r × d))ᵀ ω_b
-    let (ja, jb) = (
-        ra.transpose() * arm_a.cross(d),
-        rb.transpose() * arm_b.cross(d),
-    );
-    let mut row = [0.0; 12];
-    for i in 0..3 {
-        row[i] = d[i];
-        row[3 + i] = ja[i];
-        row[6 + i] = -d[i];
-        row[9 + i] = -jb[i];
+/// The witness points' arms from the two bodies' COMs and the bodies' rotations (body to
+/// world), shared by a frame's three rows.
+struct Arms {
+    arm_a: Vector3<f64>,
+    arm_b: Vector3<f64>,
+    rot_a: nalgebra::Matrix3<f64>,
+    rot_b: nalgebra::Matrix3<f64>,
+}
+
+impl Arms {
+    fn new(w: &Witness, body_a: &Pose, body_b: &Pose) -> Self {
+        Arms {
+            arm_a: w.point_a - body_a.pos,
+            arm_b: w.point_b - body_b.pos,
+            rot_a: quat::rotation(&body_a.quat),
+            rot_b: quat::rotation(&body_b.quat),
+        }
     }
-    row
+
+    /// `d · (v_a(w_a) − v_b(w_b))` at the witness points as a row in `(v, ω_body)` of a and b.
+    fn velocity_row(&self, d: &Vector3<f64>) -> [f64; 12] {
+        // d · (v + R ω_b × r) = dᵀ v + (Rᵀ (r × d))ᵀ ω_b
+        let (ja, jb) = (
+            self.rot_a.transpose() * self.arm_a.cross(d),
+            self.rot_b.transpose() * self.arm_b.cross(d),
+        );
+        let mut row = [0.0; 12];
+        for i in 0..3 {
+            row[i] = d[i];
+            row[3 + i] = ja[i];
+            row[6 + i] = -d[i];
+            row[9 + i] = -jb[i];
+        }
+        row
+    }
 }
 
 /// A candidate's rows for one step at its current poses, built on first use: the impulse
