@@ -161,6 +161,30 @@ def test_warm_start_margin_is_an_option_and_validated(pend):
         assert np.abs(tr.qvel[-100:]).max() < 1e-8
 
 
+def test_warm_start_widening_is_an_option_and_validated(pend):
+    # bad values name the field; a box dropped onto the floor lands and comes to rest, on the
+    # same surface, whatever the widening of its warm starts (it changes only the solver's path)
+    for bad in (0.0, -1e-2, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="warm_start_widening"):
+            pend.with_options(warm_start_widening=bad)
+    assert pend.options["warm_start_widening"] == 1e-2
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("floor", body="world", shape="plane", friction=0.8)
+    b.add_body("box", mass=1.0, inertia=(0.01, 0.01, 0.01), pos=(0, 0, 0.3))
+    b.add_joint("free", kind="floating", parent="world", child="box")
+    b.add_geom("g", body="box", shape="box", size=(0.1, 0.1, 0.1), friction=0.8)
+    m = b.compile()
+    s0 = m.make_state(qpos=[0, 0, 0.3, 0.9659, 0.2588, 0, 0], qvel=[0.5, 0, 0, 0, 0, 2.0])
+    ends = []
+    for widening in (1e-3, 1e-2, 1e-1):
+        tr = ukemi.rollout(m.with_options(warm_start_widening=widening), s0, nsteps=300)
+        assert tr.converged
+        assert np.abs(tr.qvel[-20:]).max() < 1e-6
+        ends.append(tr.qpos[-1, 2])
+    # at rest on a face: the centre 0.1 m above the floor
+    np.testing.assert_allclose(ends, 0.1, atol=1e-8)
+
+
 def test_nonconvergence_is_reported_not_silent(pend):
     tight = pend.with_options(max_iter=1, rtol=1e-300, acceptable_rtol=0.0)
     s0 = tight.make_state(qpos=[1.0], qvel=[3.0])

@@ -470,6 +470,8 @@ impl PyModel {
             ("stall_iter", o.stall_iter as f64),
             ("max_ls", o.max_ls as f64),
             ("undercut", o.undercut),
+            ("warm_start_margin", o.warm_start_margin),
+            ("warm_start_widening", o.warm_start_widening),
             ("regularization", o.regularization),
             ("activation_margin", o.activation_margin),
             ("max_subdivisions", o.max_subdivisions as f64),
@@ -512,7 +514,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -532,6 +534,7 @@ impl PyModel {
         undercut: Option<f64>,
         warm_start: Option<Bound<'_, PyAny>>,
         warm_start_margin: Option<f64>,
+        warm_start_widening: Option<f64>,
         regularization: Option<f64>,
         kappa_grad: Option<f64>,
         activation_margin: Option<f64>,
@@ -587,6 +590,7 @@ impl PyModel {
             o.undercut = undercut.unwrap_or(o.undercut);
             o.warm_start = flag("warm_start", warm_start, o.warm_start)?;
             o.warm_start_margin = warm_start_margin.unwrap_or(o.warm_start_margin);
+            o.warm_start_widening = warm_start_widening.unwrap_or(o.warm_start_widening);
             o.nt_scaling = flag("nt_scaling", nt_scaling, o.nt_scaling)?;
             o.central_warm_start = flag(
                 "central_warm_start",

@@ -337,8 +337,9 @@ pub struct StepReport {
 /// of Dojo's Figs. 9-10 and solver debugging).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IterationRecord {
-    /// Attempt within the step: 0 = first solve, 1 = cold retry, 2.. = re-solves after a
-    /// missed contact.
+    /// Attempt within the step, counting up: 0 = first solve, then each retry in turn (the
+    /// first attempt widened gently, cold retries, wider activations, re-solves after a missed
+    /// contact).
     pub attempt: u8,
     /// Equality residual ∞-norm before the iteration (eq. 49).
     pub residual: f64,
@@ -477,6 +478,19 @@ pub struct Workspace {
     /// Whether the third activation tier activates every candidate rather than modelling the
     /// left-out ones (`newton::solve`): set by a step's last resort (`step::long_solve`).
     pub(crate) every_candidate: bool,
+    /// The widening a first attempt's warm start takes: `ipm::WIDEN_IMPULSE`, or after that
+    /// attempt failed, the gentle `ipm::WIDEN_IMPULSE_GENTLE` (`newton::solve_active`).
+    pub(crate) gentle_widening: bool,
+    /// Whether the last interior-point attempt widened its warm start.
+    pub(crate) widened: bool,
+}
+
+impl Workspace {
+    /// Whether the interior-point attempt under way is a step's first (or that attempt again,
+    /// widened gently): it may widen its warm start and hold separated candidates' friction.
+    pub(crate) fn first_attempt(&self) -> bool {
+        self.attempt == 0 || self.gentle_widening
+    }
 }
 
 /// Most spare workspaces kept per thread ([`Workspace::pooled`]): a linearisation holds two
@@ -781,6 +795,8 @@ impl Workspace {
             stalled_near: false,
             far: Default::default(),
             every_candidate: false,
+            gentle_widening: false,
+            widened: false,
         }
     }
 }

@@ -98,7 +98,8 @@ def solver_trace(model, state, ctrl=None, *, condition=False):
 
     Returns:
         (next_state, info, trace): ``trace`` is a dict of per-iteration arrays: ``attempt``
-        (0 = first solve, 1 = cold retry, 2.. = re-solve after a missed contact), ``residual``
+        (0 = first solve, then each retry counting up: the first attempt widened gently, cold
+        retries, wider activations, re-solves after a missed contact), ``residual``
         and ``complementarity`` (the violations before the iteration), ``mu`` (mean
         complementarity), ``kappa`` (centring target), ``alpha_aff``, ``alpha`` (accepted step,
         0 = line search failed), ``corrector`` (Mehrotra's direction accepted), ``condition``

@@ -101,6 +101,11 @@ pub struct Options {
     pub warm_start: bool,
     /// Margin inside the cones for warm-started variables. Default 1e-6.
     pub warm_start_margin: f64,
+    /// How far inside their cones a warm start's impulses (γ, ξ) are pushed when its first
+    /// predictor step is cut below half its length (contacts changing state). Default 1e-2
+    /// (1e-3 until session 29: 6-10% more iterations on the humanoid and A1). A first attempt
+    /// so widened that fails is retried widened by 1e-3 before anything else.
+    pub warm_start_widening: f64,
     /// Fraction-to-boundary floor for orthant variables, τ_min. Default 0.95.
     pub tau_min: f64,
     /// Fraction-to-boundary ceiling for second-order cones, τ_max. Default 0.99.
@@ -199,6 +204,7 @@ impl Default for Options {
             undercut: 10.0,
             warm_start: true,
             warm_start_margin: 1e-6,
+            warm_start_widening: 1e-2,
             tau_min: 0.95,
             tau_max: 0.99,
             activation_margin: 0.01,
@@ -255,6 +261,14 @@ impl Options {
             Error::model(
                 "warm_start_margin",
                 self.warm_start_margin,
+                "must be finite and > 0"
+            )
+        );
+        ensure!(
+            self.warm_start_widening.is_finite() && self.warm_start_widening > 0.0,
+            Error::model(
+                "warm_start_widening",
+                self.warm_start_widening,
                 "must be finite and > 0"
             )
         );

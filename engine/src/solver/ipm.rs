@@ -62,8 +62,8 @@ const SHORT_COUNT: usize = 3;
 const SHORT_STEP: f64 = 1e-3;
 
 /// A warm start whose first affine step is cut below `WIDEN_BELOW` of its length is pushed
-/// inside its cones by `WIDEN_IMPULSE` (impulses: γ, ξ) and `WIDEN_SLACK` (gaps and slip
-/// slacks: s, η) before the first Newton step ([`super::inequality::widen`]).
+/// inside its cones by `Options::warm_start_widening` (impulses: γ, ξ) and `WIDEN_SLACK` (gaps
+/// and slip slacks: s, η) before the first Newton step ([`super::inequality::widen`]).
 ///
 /// Why: the warm start sits on the previous solution's cone boundaries (`warm_start_margin`
 /// 1e-6 inside), and when contacts change state the first 5-10 steps were cut to a few percent
@@ -73,8 +73,18 @@ const SHORT_STEP: f64 = 1e-3;
 /// its solves ending at different points of the `kappa_tol` band), and the widening alone,
 /// before the blocking cones were moved to the central path ([`super::central::unblock`]),
 /// failed 22 Panda steps in 12 runs.
+///
+/// The impulses' widening was 1e-3 until session 29; 1e-2 saves iterations where contacts
+/// change state, measured on the same states (`option_ab MODEL 300 SEED warm_start_widening
+/// 1e-3 1e-2`), 8 seeds × 300 steps: humanoid 38315 → 35701 iterations (1.89 → 1.80 s), A1
+/// 29343 → 27610 (1.35 → 1.27 s), Panda 14057 → 13206 (0.98 → 0.73 s); Table V's 1000 steps:
+/// humanoid −9%, A1 −10%, Panda and X2 ±1%. 1e-1 saved the humanoid more and cost the Panda
+/// up to twice its time. A widened first attempt that fails is solved again widened by
+/// `WIDEN_IMPULSE_GENTLE` (`newton::solve_active`): the humanoid's wedged limb
+/// (`tests/hard_steps.rs`, seed 2 step 143) converges in 18 iterations from 1e-3 and failed
+/// every attempt from 1e-2.
 const WIDEN_BELOW: f64 = 0.5;
-const WIDEN_IMPULSE: f64 = 1e-3;
+pub(crate) const WIDEN_IMPULSE_GENTLE: f64 = 1e-3;
 const WIDEN_SLACK: f64 = 1e-2;
 
 /// A hard solve that reaches `max_iter` with its equality residual below `ENDGAME_RESIDUAL`
@@ -122,12 +132,13 @@ pub(crate) fn solve_to(
     let p = &model.topology.pattern;
     let floor = central.unwrap_or(o.kappa_tol / o.undercut);
     ws.nt.fill(None);
+    ws.widened = false;
     // friction of candidates apart, held at zero while they stay apart (hard solves only: the
     // central path gives every candidate its friction)
     super::saturation::release_separated(ws);
     let separated = central.is_none()
         && o.drop_redundant_friction
-        && ws.attempt == 0
+        && ws.first_attempt()
         && super::saturation::hold_separated(model, ws) > 0;
     let mut vio = evaluate_kept(model, state, ws, false, 0.0);
     let mut report = StepReport {
@@ -231,12 +242,18 @@ pub(crate) fn solve_to(
         let alpha_aff = cone_search(model, act, &ws.saturated, &ws.w, &ws.delta_aff, 1.0, 1.0);
         // a warm start that the first predictor cannot leave far: pushed further inside
         if it == 0
-            && ws.attempt == 0
+            && ws.first_attempt()
             && central.is_none()
             && o.warm_start
             && alpha_aff < WIDEN_BELOW
         {
-            super::inequality::widen(model, ws, WIDEN_IMPULSE, WIDEN_SLACK);
+            let impulse = if ws.gentle_widening {
+                WIDEN_IMPULSE_GENTLE.min(o.warm_start_widening)
+            } else {
+                o.warm_start_widening
+            };
+            super::inequality::widen(model, ws, impulse, WIDEN_SLACK);
+            ws.widened = true;
             vio = evaluate_kept(model, state, ws, false, 0.0);
             continue;
         }

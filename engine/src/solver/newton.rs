@@ -790,7 +790,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             ws.active.fill(true);
         }
         let iterations = report.iterations;
-        ws.attempt = 2 + round as u8;
+        ws.attempt += 1;
         restart_warm(model, state, ws);
         report = solve_active(model, state, ws, RETRIES);
         report.iterations += iterations;
@@ -860,6 +860,18 @@ fn solve_active(
     // from `squat` followed the same iterates from the eighth iteration on, 50 iterations per tier)
     let warm_is_cold = at_neutral_point(model, ws);
     let mut report = super::ipm::solve(model, state, ws);
+    let gentler = model.options.warm_start_widening > super::ipm::WIDEN_IMPULSE_GENTLE;
+    if !report.status.is_success() && ws.widened && ws.attempt == 0 && gentler {
+        // the widened warm start failed: once more from the warm start widened gently
+        // (`ipm::WIDEN_IMPULSE_GENTLE`)
+        let first = report.iterations;
+        restart_warm(model, state, ws);
+        ws.attempt += 1;
+        ws.gentle_widening = true;
+        report = super::ipm::solve(model, state, ws);
+        ws.gentle_widening = false;
+        report.iterations += first;
+    }
     let retries: &[bool] = match (model.options.warm_start, model.options.nt_scaling) {
         (true, true) if warm_is_cold => &[false],
         (true, true) => &[true, false],
