@@ -1,6 +1,7 @@
 //! Steps that fail every ordinary attempt and converge through a step's last resorts
 //! (`step::long_solve`, then the exact problem without `drop_redundant_friction`'s shortcuts,
-//! then both problems from the start rebuilt from its minimal coordinates).
+//! then the step from the start rebuilt from its minimal coordinates), and a first attempt
+//! retried with the gentle warm-start widening.
 #[allow(dead_code)]
 #[path = "../examples/common/workload.rs"]
 mod workload;
