@@ -40,6 +40,14 @@ fn as_found(model: &Model) -> Model {
         .unwrap()
 }
 
+/// `state` rebuilt from its minimal coordinates (what `rollout_vjp` and the JAX layer step
+/// from).
+fn rebuilt(model: &Model, state: &State) -> State {
+    let mut out = state.clone();
+    set_minimal(model, &mut out, &qpos(model, state), &qvel(model, state)).unwrap();
+    out
+}
+
 /// Whether no contact of `state` sinks.
 fn assert_no_penetration(model: &Model, state: &State) {
     let deepest = ukemi_engine::contact::signed_distances(model, state)
@@ -70,14 +78,7 @@ fn a_wedged_humanoid_step_converges() {
     .unwrap();
     let jac = lin.jacobians(&model).unwrap();
     assert!(jac.a.iter().chain(jac.b.iter()).all(|x| x.is_finite()));
-    let mut rebuilt = state.clone();
-    set_minimal(
-        &model,
-        &mut rebuilt,
-        &qpos(&model, &state),
-        &qvel(&model, &state),
-    )
-    .unwrap();
+    let mut rebuilt = rebuilt(&model, &state);
     let report = step(&model, &mut rebuilt, &mut Workspace::new(&model), &u).unwrap();
     assert!(report.status.is_success(), "{report:?}");
     assert_no_penetration(&model, &rebuilt);
@@ -124,14 +125,7 @@ fn a_jammed_exact_start_is_stepped_from_its_rebuilt_state() {
         return;
     };
     let model = as_found(&model);
-    let mut rebuilt = state.clone();
-    set_minimal(
-        &model,
-        &mut rebuilt,
-        &qpos(&model, &state),
-        &qvel(&model, &state),
-    )
-    .unwrap();
+    let mut rebuilt = rebuilt(&model, &state);
     let report = step(&model, &mut state, &mut Workspace::new(&model), &u).unwrap();
     assert!(report.status.is_success(), "{report:?}");
     assert_no_penetration(&model, &state);
