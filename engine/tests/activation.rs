@@ -281,3 +281,48 @@ fn small_geoms_are_activated_within_their_own_size() {
     );
     assert!(va.x < -0.02, "the struck box must move: {va}");
 }
+
+/// A body of two boxes side by side whose bottoms lie 7 mm apart in height (more than half the
+/// 1 cm margin, less than the margin), at rest on the floor on the lower box's bottom (its
+/// centre of mass over that box): the
+/// corners of both boxes are points of one rigid body, the lower box's touch first, and the
+/// upper box's four bottom corners are left out (box by box they were active: each box's own
+/// lowest corner is within the margin). Like the Skydio X2 upside down on its three box tops.
+#[test]
+fn a_bodys_boxes_share_their_lowest_corner() {
+    use ukemi_engine::{BodySpec, GeomSpec, JointKind, JointSpec};
+    let half = Vector3::new(0.05, 0.05, 0.02);
+    let model = ModelBuilder::new()
+        .timestep(0.01)
+        .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.8))
+        .body(BodySpec::new("two", 1.0, [0.002, 0.003, 0.004]).pos([0.0, 0.0, 0.02]))
+        .joint(JointSpec::new("free", JointKind::Floating, "world", "two"))
+        .geom(GeomSpec::new("low", "two", Shape::Box { half_extents: half }).friction(0.8))
+        .geom(
+            GeomSpec::new("high", "two", Shape::Box { half_extents: half })
+                .pos([0.12, 0.0, 0.007])
+                .friction(0.8),
+        )
+        .compile()
+        .unwrap();
+    let mut state = State::reference(&model);
+    let mut ws = Workspace::new(&model);
+    let mut active = Vec::new();
+    for _ in 0..50 {
+        let r = step(&model, &mut state, &mut ws, &[]).unwrap();
+        assert!(r.status.is_success(), "{r:?}");
+        active.push(ws.active_contacts());
+    }
+    // the lower box's four bottom corners, and none of the upper box's
+    assert!(active[10..].iter().all(|&n| n == 4), "{active:?}");
+    // at rest on the lower box, which carries the body: no penetration, no creep
+    let least = contact::signed_distances(&model, &state)
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
+    assert!(least > -1e-9, "{least:e}");
+    let (v, w) = state.velocity(1);
+    assert!(v.norm() < 1e-6 && w.norm() < 1e-6, "{v:?} {w:?}");
+    let pose = state.pose(1);
+    assert!((pose.pos.z - 0.02).abs() < 1e-6, "{:?}", pose.pos);
+    assert!(pose.quat.w.abs() > 1.0 - 1e-9, "tipped: {:?}", pose.quat);
+}
