@@ -478,8 +478,9 @@ pub struct Workspace {
     /// Whether the third activation tier activates every candidate rather than modelling the
     /// left-out ones (`newton::solve`): set by a step's last resort (`step::long_solve`).
     pub(crate) every_candidate: bool,
-    /// The widening a first attempt's warm start takes: `ipm::WIDEN_IMPULSE`, or after that
-    /// attempt failed, the gentle `ipm::WIDEN_IMPULSE_GENTLE` (`newton::solve_active`).
+    /// Set while a failed first attempt is solved again with its warm start widened by the
+    /// gentle `ipm::WIDEN_IMPULSE_GENTLE` instead of `Options::warm_start_widening`
+    /// (`newton::solve_active`).
     pub(crate) gentle_widening: bool,
     /// Whether the last interior-point attempt widened its warm start.
     pub(crate) widened: bool,
