@@ -633,6 +633,8 @@ impl Workspace {
         self.trace = None;
         self.trace_condition = false;
         self.attempt = 0;
+        self.gentle_widening = false;
+        self.widened = false;
         self.kept.valid = false;
         if !iterate {
             return;

@@ -752,7 +752,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
                 continue; // nothing left out: the same solve again
             }
             let iterations = report.iterations;
-            ws.attempt += 1;
+            ws.attempt = ws.attempt.saturating_add(1);
             ws.far = far;
             restart_warm(model, state, ws);
             report = solve_active(model, state, ws, 1);
@@ -765,7 +765,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             continue;
         }
         let iterations = report.iterations;
-        ws.attempt += 1;
+        ws.attempt = ws.attempt.saturating_add(1);
         restart_warm(model, state, ws);
         report = solve_active(model, state, ws, 1);
         report.iterations += iterations;
@@ -790,7 +790,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             ws.active.fill(true);
         }
         let iterations = report.iterations;
-        ws.attempt += 1;
+        ws.attempt = ws.attempt.saturating_add(1);
         restart_warm(model, state, ws);
         report = solve_active(model, state, ws, RETRIES);
         report.iterations += iterations;
@@ -866,7 +866,7 @@ fn solve_active(
         // (`ipm::WIDEN_IMPULSE_GENTLE`)
         let first = report.iterations;
         restart_warm(model, state, ws);
-        ws.attempt += 1;
+        ws.attempt = ws.attempt.saturating_add(1);
         ws.gentle_widening = true;
         report = super::ipm::solve(model, state, ws);
         ws.gentle_widening = false;
@@ -893,7 +893,7 @@ fn solve_active(
             acceptable = Some(report);
         }
         restart_cold(model, state, ws);
-        ws.attempt += 1;
+        ws.attempt = ws.attempt.saturating_add(1);
         ws.nt_disabled = !scaled;
         report = super::ipm::solve(model, state, ws);
         ws.nt_disabled = false;
