@@ -335,6 +335,23 @@ pub(crate) fn models_for(
     }
 }
 
+/// Run `f(model_i, i)` for every batch element `i` on the thread pool with the GIL released:
+/// one model, or one per element when `params` (B, nparams) is given.
+fn batched_off_gil<T: Send>(
+    py: Python<'_>,
+    model: &PyModel,
+    params: Option<&[f64]>,
+    batch: usize,
+    f: impl Fn(&Model, usize) -> ukemi_engine::Result<T> + Sync,
+) -> PyResult<Vec<T>> {
+    let (m, f) = (model.inner.clone(), &f);
+    py.detach(|| {
+        let models = models_for(&m, params, batch)?;
+        flat::batched(&models, batch, f)
+    })
+    .py()
+}
+
 /// Concatenate per-element triples of outputs into three flat buffers (batch-major).
 fn concat3(parts: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let (mut a, mut b, mut c) = (vec![], vec![], vec![]);
@@ -379,16 +396,10 @@ pub fn flat_step<'py>(
         same_batch("us", b, us.shape()[0])?;
         let (xs, us) = (xs.as_slice()?, us.as_slice()?);
         let p = slice2(&params)?;
-        let m = model.inner.clone();
-        let out = py
-            .detach(|| {
-                let models = models_for(&m, p, b)?;
-                flat::batched(&models, b, |mm, i| {
-                    let (x, u) = (&xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu]);
-                    flat::step_kept(mm, x, u, keep)
-                })
-            })
-            .py()?;
+        let out = batched_off_gil(py, model, p, b, |mm, i| {
+            let (x, u) = (&xs[i * n..(i + 1) * n], &us[i * nu..(i + 1) * nu]);
+            flat::step_kept(mm, x, u, keep)
+        })?;
         PyArray1::from_vec(py, out.concat()).reshape([b, n])
     })
 }
@@ -417,23 +428,21 @@ pub fn flat_step_vjp<'py>(
         same_batch("adj", b, adj.shape()[0])?;
         let (xs, us, adj) = (xs.as_slice()?, us.as_slice()?, adj.as_slice()?);
         let p = slice2(&params)?;
-        let m = model.inner.clone();
-        let np = if wrt_params { m.params().len() } else { 0 };
-        let out = py
-            .detach(|| {
-                let models = models_for(&m, p, b)?;
-                flat::batched(&models, b, |mm, i| {
-                    flat::step_vjp(
-                        mm,
-                        &xs[i * n..(i + 1) * n],
-                        &us[i * nu..(i + 1) * nu],
-                        &adj[i * n..(i + 1) * n],
-                        kappa_grad,
-                        wrt_params,
-                    )
-                })
-            })
-            .py()?;
+        let np = if wrt_params {
+            model.inner.params().len()
+        } else {
+            0
+        };
+        let out = batched_off_gil(py, model, p, b, |mm, i| {
+            flat::step_vjp(
+                mm,
+                &xs[i * n..(i + 1) * n],
+                &us[i * nu..(i + 1) * nu],
+                &adj[i * n..(i + 1) * n],
+                kappa_grad,
+                wrt_params,
+            )
+        })?;
         let (gx, gu, gp) = concat3(out);
         Ok((
             PyArray1::from_vec(py, gx).reshape([b, n])?,
@@ -460,21 +469,15 @@ pub fn flat_rollout<'py>(
         same_batch("us", b, us.shape()[0])?;
         let (x0s, us) = (x0s.as_slice()?, us.as_slice()?);
         let p = slice2(&params)?;
-        let m = model.inner.clone();
-        let out = py
-            .detach(|| {
-                let models = models_for(&m, p, b)?;
-                flat::batched(&models, b, |mm, i| {
-                    flat::rollout_kept(
-                        mm,
-                        &x0s[i * n..(i + 1) * n],
-                        &us[i * t * nu..(i + 1) * t * nu],
-                        t,
-                        keep,
-                    )
-                })
-            })
-            .py()?;
+        let out = batched_off_gil(py, model, p, b, |mm, i| {
+            flat::rollout_kept(
+                mm,
+                &x0s[i * n..(i + 1) * n],
+                &us[i * t * nu..(i + 1) * t * nu],
+                t,
+                keep,
+            )
+        })?;
         PyArray1::from_vec(py, out.concat()).reshape([b, t + 1, n])
     })
 }
@@ -511,24 +514,22 @@ pub fn flat_rollout_vjp<'py>(
         }
         let (x0s, us, adj) = (x0s.as_slice()?, us.as_slice()?, adj.as_slice()?);
         let p = slice2(&params)?;
-        let m = model.inner.clone();
-        let np = if wrt_params { m.params().len() } else { 0 };
-        let out = py
-            .detach(|| {
-                let models = models_for(&m, p, b)?;
-                flat::batched(&models, b, |mm, i| {
-                    flat::rollout_vjp(
-                        mm,
-                        &x0s[i * n..(i + 1) * n],
-                        &us[i * t * nu..(i + 1) * t * nu],
-                        t,
-                        &adj[i * (t + 1) * n..(i + 1) * (t + 1) * n],
-                        kappa_grad,
-                        wrt_params,
-                    )
-                })
-            })
-            .py()?;
+        let np = if wrt_params {
+            model.inner.params().len()
+        } else {
+            0
+        };
+        let out = batched_off_gil(py, model, p, b, |mm, i| {
+            flat::rollout_vjp(
+                mm,
+                &x0s[i * n..(i + 1) * n],
+                &us[i * t * nu..(i + 1) * t * nu],
+                t,
+                &adj[i * (t + 1) * n..(i + 1) * (t + 1) * n],
+                kappa_grad,
+                wrt_params,
+            )
+        })?;
         let (gx, gu, gp) = concat3(out);
         Ok((
             PyArray1::from_vec(py, gx).reshape([b, n])?,
@@ -572,22 +573,20 @@ pub fn flat_step_jacobians<'py>(
         same_batch("us", b, us.shape()[0])?;
         let (xs, us) = (xs.as_slice()?, us.as_slice()?);
         let p = slice2(&params)?;
-        let m = model.inner.clone();
-        let np = if wrt_params { m.params().len() } else { 0 };
-        let out = py
-            .detach(|| {
-                let models = models_for(&m, p, b)?;
-                flat::batched(&models, b, |mm, i| {
-                    flat::step_jacobians(
-                        mm,
-                        &xs[i * n..(i + 1) * n],
-                        &us[i * nu..(i + 1) * nu],
-                        kappa_grad,
-                        wrt_params,
-                    )
-                })
-            })
-            .py()?;
+        let np = if wrt_params {
+            model.inner.params().len()
+        } else {
+            0
+        };
+        let out = batched_off_gil(py, model, p, b, |mm, i| {
+            flat::step_jacobians(
+                mm,
+                &xs[i * n..(i + 1) * n],
+                &us[i * nu..(i + 1) * nu],
+                kappa_grad,
+                wrt_params,
+            )
+        })?;
         let (ga, gb, gc) = concat3(out);
         Ok((
             PyArray1::from_vec(py, ga).reshape([b, n, n])?,
