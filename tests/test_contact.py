@@ -183,6 +183,24 @@ def test_friction_cones_judged_by_duality_gap_or_jordan_product_slide_alike():
         np.testing.assert_allclose(np.diff(speed), -0.5 * 9.81 * 0.01, rtol=1e-6)
 
 
+def test_solver_trace_condition_numbers_on_a_robot():
+    """On a robot the condition number is taken on the rows the solve factors: the gymnasium
+    humanoid's hundreds of contact candidates left out of a resting step would make the dense
+    SVD thousands of rows wide (and add their identity rows' unit singular values)."""
+    m = ukemi.Model.from_xml_path(ukemi.gymnasium_asset_path("humanoid"))
+    s = m.make_state()
+    for _ in range(300):  # fall onto the floor (0.9 s)
+        s, _ = ukemi.step(m, s, np.zeros(m.nu))
+    assert ukemi.signed_distances(m, s).min() < 1e-9
+    assert m.ncontact > 100
+    _, info, trace = ukemi.solver_trace(m, s, condition=True)
+    assert info.converged
+    cond = trace["condition"]
+    assert np.all(np.isfinite(cond)) and np.all(cond >= 1)
+    # hard contact: the matrix grows ill-conditioned as the complementarity falls
+    assert len(cond) > 5 and cond[-1] > 10 * cond[0]
+
+
 def test_solver_trace_without_condition_numbers():
     m = ball_on_floor(z=0.1)
     _, info, trace = ukemi.solver_trace(m, m.make_state())

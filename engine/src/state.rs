@@ -355,8 +355,9 @@ pub struct IterationRecord {
     pub alpha: f64,
     /// Whether Mehrotra's corrected direction was accepted (else the plain centred Newton one).
     pub corrector: bool,
-    /// 2-norm condition-number estimate of the Newton matrix (only with `set_trace(true, true)`;
-    /// NaN otherwise).
+    /// 2-norm condition number of the Newton matrix on the rows the solve factors (the contact
+    /// candidates left out are not among them; only with `set_trace(true, true)`; NaN
+    /// otherwise).
     pub condition: f64,
 }
 

@@ -93,8 +93,9 @@ def solver_trace(model, state, ctrl=None, *, condition=False):
 
     Args:
         model, state, ctrl: as for :func:`step`.
-        condition: also estimate the 2-norm condition number of the Newton matrix at each
-            iteration (a dense SVD: small models only).
+        condition: also compute the 2-norm condition number of the Newton matrix at each
+            iteration, on the rows the solve factors (contact candidates left out of the
+            step are not among them), by a dense SVD of those rows.
 
     Returns:
         (next_state, info, trace): ``trace`` is a dict of per-iteration arrays: ``attempt``

@@ -405,16 +405,26 @@ pub(crate) fn fractions_to_boundary(model: &Model, vio: Violation) -> (f64, f64)
     (tau_ort, tau_soc)
 }
 
-/// 2-norm condition number of the assembled (not yet factored) Newton matrix, from a dense copy.
+/// 2-norm condition number of the assembled (not yet factored) Newton matrix on its live rows,
+/// from a dense copy. The rows and columns of the candidates left out of the solve are the
+/// identity's, decoupled from the rest (`BlockMatrix::set_skipped`): they are left out, so
+/// that a robot's hundreds of far candidates neither hide the solve's conditioning nor make
+/// the dense SVD thousands of rows wide (the shared humanoid's 371 candidates: ~3000).
 fn condition_number(ws: &Workspace, p: &crate::solver::graph_ldu::BlockPattern) -> f64 {
-    let n = ws.w.len();
-    let mut dense = nalgebra::DMatrix::zeros(n, n);
+    let live: Vec<usize> = (0..p.nnodes())
+        .filter(|&n| !ws.matrix.is_skipped(n))
+        .flat_map(|n| p.offset(n)..p.offset(n) + p.dim(n))
+        .collect();
+    let (n, m) = (ws.w.len(), live.len());
+    let mut dense = nalgebra::DMatrix::zeros(m, m);
     let (mut e, mut col) = (vec![0.0; n], vec![0.0; n]);
-    for j in 0..n {
-        e[j] = 1.0;
+    for (j, &c) in live.iter().enumerate() {
+        e[c] = 1.0;
         ws.matrix.matvec(p, &e, &mut col);
-        e[j] = 0.0;
-        dense.column_mut(j).copy_from_slice(&col);
+        e[c] = 0.0;
+        for (i, &r) in live.iter().enumerate() {
+            dense[(i, j)] = col[r];
+        }
     }
     let sv = dense.singular_values();
     sv.max() / sv.min()
