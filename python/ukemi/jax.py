@@ -167,6 +167,26 @@ def _f64s(*shapes):
 
 
 # ------------------------------------------------------------------------------ custom VJPs
+def _differentiable(call_fwd, call_bwd):
+    """``jit(f)`` with ``f(x, u, p) = call_fwd(x, u, p)`` and the VJP ``call_bwd(x, u, p, g)``.
+    The forward pass of a differentiated call asks the engine to keep its solved steps
+    (``keep=True``) for ``call_bwd`` with the same inputs, which then linearises them instead
+    of solving them again."""
+
+    @jax.custom_vjp
+    def f(x, u, p):
+        return call_fwd(x, u, p)
+
+    def f_fwd(x, u, p):
+        return call_fwd(x, u, p, keep=True), (x, u, p)
+
+    def f_bwd(res, g):
+        return tuple(call_bwd(*res, g))
+
+    f.defvjp(f_fwd, f_bwd)
+    return jax.jit(f)
+
+
 @functools.lru_cache(maxsize=None)
 def _step_fn(model, kappa, with_params, how):
     """``f(x, u, p)`` with equal leading axes on x (…, nx), u (…, nu), p (…, np or 0)."""
@@ -198,19 +218,7 @@ def _step_fn(model, kappa, with_params, how):
             return jax.pure_callback(bwd_cb, _f64s(x.shape, u.shape, p.shape), x, u, p, g,
                                      vmap_method="broadcast_all")
 
-    @jax.custom_vjp
-    def f(x, u, p):
-        return call_fwd(x, u, p)
-
-    def f_fwd(x, u, p):
-        # differentiated: the engine keeps the solved step for `call_bwd` with the same inputs
-        return call_fwd(x, u, p, keep=True), (x, u, p)
-
-    def f_bwd(res, g):
-        return tuple(call_bwd(*res, g))
-
-    f.defvjp(f_fwd, f_bwd)
-    return jax.jit(f)
+    return _differentiable(call_fwd, call_bwd)
 
 
 @functools.lru_cache(maxsize=None)
@@ -249,20 +257,7 @@ def _rollout_fn(model, kappa, with_params, how):
             return jax.pure_callback(bwd_cb, _f64s(x0.shape, us.shape, p.shape), x0, us, p, g,
                                      vmap_method="broadcast_all")
 
-    @jax.custom_vjp
-    def f(x0, us, p):
-        return call_fwd(x0, us, p)
-
-    def f_fwd(x0, us, p):
-        # differentiated: the engine keeps this forward pass for `call_bwd` with the same
-        # inputs, which then linearises the stored steps instead of solving them again
-        return call_fwd(x0, us, p, keep=True), (x0, us, p)
-
-    def f_bwd(res, g):
-        return tuple(call_bwd(*res, g))
-
-    f.defvjp(f_fwd, f_bwd)
-    return jax.jit(f)
+    return _differentiable(call_fwd, call_bwd)
 
 
 # ---------------------------------------------------------------------------------- public
