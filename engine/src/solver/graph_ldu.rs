@@ -26,7 +26,7 @@ use std::ops::Range;
 
 use super::dense::{
     copy_small, gemm_sub, gemv_add, gemv_sub, gemv_t_sub, lu_factor, lu_solve,
-    lu_solve_left_matrix, lu_solve_transpose,
+    lu_solve_left_matrix, lu_solve_transpose, lu_solve_transpose_left_matrix,
 };
 
 /// One elimination step: the node eliminated and where its data lives.
@@ -855,7 +855,6 @@ impl BlockMatrix {
         let Self {
             values,
             pivots,
-            scratch,
             many,
             nz,
             live,
@@ -893,14 +892,7 @@ impl BlockMatrix {
                 sub_t(w, a, &b[rows_of(nb.row, nb.dim)], nb.dim, dk);
             }
             let piv = &pivots[s.row..s.row + dk];
-            for col in 0..k {
-                let x = &mut scratch[..dk];
-                x.iter_mut()
-                    .enumerate()
-                    .for_each(|(r, x)| *x = w[r * k + col]);
-                lu_solve_transpose(&values[s.diag..], dk, piv, x);
-                x.iter().enumerate().for_each(|(r, x)| w[r * k + col] = *x);
-            }
+            lu_solve_transpose_left_matrix(&values[s.diag..], dk, piv, w, k);
             b[rows_of(s.row, dk)].copy_from_slice(w);
         }
     }
