@@ -1,7 +1,8 @@
 //! Forward-step speed on an MJCF model, the Table V workload without Jacobians (dt = 0.01,
 //! controls uniform in the control range, the same generator as `gradient_phases`):
 //! `cargo run --release -p ukemi-engine --example step_bench -- MODEL.xml [STEPS] [REPEATS] [SEED]`
-//! (SEED: another control sequence than the default one).
+//! (SEED: another control sequence than the default one; `UKEMI_SLOWEST=N` lists the N slowest
+//! steps).
 //! Prints the best-of-`REPEATS` ms/step, the IPM iterations per step (mean, median, max, and
 //! the mean with each step capped at 100, which the rare stalled steps do not dominate), the
 //! share of the run's time spent in its slowest 1% of steps, the
@@ -23,6 +24,10 @@ fn main() {
     let repeats: usize = args.get(3).map_or(1, |s| s.parse().unwrap());
     let seed: Option<u64> = args.get(4).map(|s| s.parse().unwrap());
     let model = workload::load(path);
+    // UKEMI_SLOWEST=N: list the N slowest steps of each repeat
+    let slowest: Option<usize> = std::env::var("UKEMI_SLOWEST")
+        .ok()
+        .map(|s| s.parse().unwrap());
     let mut best = f64::INFINITY;
     let mut last = None;
     for _ in 0..repeats {
@@ -37,11 +42,13 @@ fn main() {
             (Vec::new(), 0, 0, 0, 0);
         let mut limits = 0;
         let mut times = Vec::with_capacity(steps);
+        let mut per_step = Vec::with_capacity(steps);
         let t0 = Instant::now();
-        for ctrl in &ctrls {
+        for (k, ctrl) in ctrls.iter().enumerate() {
             let ts = Instant::now();
             let r = step(&model, &mut state, &mut ws, ctrl).unwrap();
             times.push(ts.elapsed().as_secs_f64());
+            per_step.push((ts.elapsed().as_secs_f64(), k, r.iterations, r.subdivisions));
             its.push(r.iterations);
             failed += usize::from(!r.status.is_success());
             subdivided += usize::from(r.subdivisions > 1);
@@ -63,6 +70,15 @@ fn main() {
             }
         }
         times.sort_unstable_by(|a, b| b.total_cmp(a));
+        if let Some(n) = slowest {
+            per_step.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+            for (t, k, it, sub) in per_step.iter().take(n) {
+                println!(
+                    "  step {k:5}: {:.3} ms, {it} iterations, {sub} sub-steps",
+                    1e3 * t
+                );
+            }
+        }
         let slow = times.iter().take(steps.div_ceil(100)).sum::<f64>() / times.iter().sum::<f64>();
         last = Some((its, failed, subdivided, active, loaded, limits, print, slow));
     }

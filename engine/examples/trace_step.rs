@@ -7,7 +7,9 @@
 //! `UKEMI_TRACE_MAX_ITER=N` solves the traced step (only) with an iteration budget of N, and
 //! `UKEMI_TRACE_CTRL=u1,u2,...` with those controls. `UKEMI_TRACE_CTRLS=FILE` takes every
 //! step's controls from FILE, one step per line, separated by commas or white space (e.g. a Python
-//! run's controls written with `np.savetxt(FILE, ctrls, delimiter=",")`).
+//! run's controls written with `np.savetxt(FILE, ctrls, delimiter=",")`). `UKEMI_TRACE_WHOLE=1`
+//! takes the traced step without sub-steps, so that the whole step's attempts are the ones
+//! traced; `UKEMI_TRACE_LOADED=1` lists the candidates that end the step with a normal impulse.
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{Workspace, step};
 
@@ -57,6 +59,15 @@ fn main() {
             o.max_iter = n.parse().unwrap();
             model.with_options(o).unwrap()
         });
+        // UKEMI_TRACE_WHOLE: the traced step without sub-steps (its whole-step attempts traced)
+        let long = match std::env::var("UKEMI_TRACE_WHOLE") {
+            Ok(_) => {
+                let mut o = long.as_ref().unwrap_or(&model).options.clone();
+                o.max_subdivisions = 1;
+                Some(model.with_options(o).unwrap())
+            }
+            Err(_) => long,
+        };
         let m = if k == which {
             long.as_ref().unwrap_or(&model)
         } else {
@@ -77,6 +88,17 @@ fn main() {
                 r.subdivisions,
                 ws.active_contacts()
             );
+            if std::env::var("UKEMI_TRACE_LOADED").is_ok() {
+                let impulse = state.contact_impulse(&model);
+                for (c, f) in impulse.chunks(3).enumerate().filter(|(_, f)| f[0] > 1e-6) {
+                    let ct = &model.contacts[c];
+                    let (a, b) = (&model.geoms[ct.geom_a].name, &model.geoms[ct.geom_b].name);
+                    println!(
+                        "  candidate {c} {a} / {b}: impulse normal {:.3e} tangential {:.3e} {:.3e}",
+                        f[0], f[1], f[2]
+                    );
+                }
+            }
             for (i, t) in ws.trace().iter().enumerate() {
                 println!(
                     "{i:4} attempt {} residual {:.2e} compl {:.2e} mu {:.2e} alpha_aff {:.2e} alpha {:.2e} corrector {}",
