@@ -185,6 +185,30 @@ def test_warm_start_widening_is_an_option_and_validated(pend):
     np.testing.assert_allclose(ends, 0.1, atol=1e-8)
 
 
+def test_friction_proximal_is_an_option_and_leaves_solutions_alone(pend):
+    # bad values name the field; the proximal friction term changes only the solver's
+    # directions (the residual stays exact): a box thrown spinning onto the floor follows the
+    # same trajectory, to the solver's tolerances, with it off, at its default and 1e6x larger
+    # (which takes other iterations: the option reaches the solver)
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="friction_proximal"):
+            pend.with_options(friction_proximal=bad)
+    assert pend.options["friction_proximal"] == 1e-2
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("floor", body="world", shape="plane", friction=0.8)
+    b.add_body("box", mass=1.0, inertia=(0.01, 0.01, 0.01), pos=(0, 0, 0.3))
+    b.add_joint("free", kind="floating", parent="world", child="box")
+    b.add_geom("g", body="box", shape="box", size=(0.1, 0.1, 0.1), friction=0.8)
+    m = b.compile()
+    s0 = m.make_state(qpos=[0, 0, 0.3, 0.9659, 0.2588, 0, 0], qvel=[0.5, 0, 0, 0, 0, 2.0])
+    runs = [ukemi.rollout(m.with_options(friction_proximal=p), s0, nsteps=150)
+            for p in (0.0, 1e-2, 1e4)]
+    assert all(tr.converged for tr in runs)
+    for tr in runs[1:]:
+        np.testing.assert_allclose(tr.qpos, runs[0].qpos, atol=1e-7)
+    assert runs[2].iterations.sum() != runs[0].iterations.sum()
+
+
 def test_nonconvergence_is_reported_not_silent(pend):
     tight = pend.with_options(max_iter=1, rtol=1e-300, acceptable_rtol=0.0)
     s0 = tight.make_state(qpos=[1.0], qvel=[3.0])

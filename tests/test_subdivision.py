@@ -132,8 +132,12 @@ def test_a_step_whose_constraints_add_energy_is_subdivided():
     """Random scene 553 (a body on a planar joint) hits the floor at step 37. The whole step's
     solve converges to a spurious root of the implicit step in which the impact adds 5.4 J (76%
     of the energy); at h/2 the body loses energy. The energy guard (option ``energy_guard``)
-    rejects that solution, takes the sub-steps, and the gradients differentiate the same."""
+    rejects that solution, takes the sub-steps, and the gradients differentiate the same.
+    (Without the proximal friction term, ``friction_proximal = 0``: with it the whole step's
+    attempts stop short of that root, 25 -> 126 iterations to reach it, and the step is
+    subdivided for failing instead, which is not what this test is about.)"""
     m, _ = random_scene(553)
+    m = m.with_options(friction_proximal=0.0)
     s = ukemi.rollout(m, m.make_state(), nsteps=36).final_state
     s36 = s
     s, _ = ukemi.step(m, s)

@@ -473,6 +473,7 @@ impl PyModel {
             ("warm_start_margin", o.warm_start_margin),
             ("warm_start_widening", o.warm_start_widening),
             ("regularization", o.regularization),
+            ("friction_proximal", o.friction_proximal),
             ("activation_margin", o.activation_margin),
             ("max_subdivisions", o.max_subdivisions as f64),
             ("energy_guard", o.energy_guard),
@@ -514,7 +515,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, regularization=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, regularization=None, friction_proximal=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -536,6 +537,7 @@ impl PyModel {
         warm_start_margin: Option<f64>,
         warm_start_widening: Option<f64>,
         regularization: Option<f64>,
+        friction_proximal: Option<f64>,
         kappa_grad: Option<f64>,
         activation_margin: Option<f64>,
         nt_scaling: Option<Bound<'_, PyAny>>,
@@ -584,6 +586,7 @@ impl PyModel {
             )?;
             o.max_ls = count("max_ls", max_ls, o.max_ls)?;
             o.regularization = regularization.unwrap_or(o.regularization);
+            o.friction_proximal = friction_proximal.unwrap_or(o.friction_proximal);
             o.kappa_tol = kappa_tol.unwrap_or(o.kappa_tol);
             o.acceptable_rtol = acceptable_rtol.unwrap_or(o.acceptable_rtol);
             o.acceptable_kappa_tol = acceptable_kappa_tol.unwrap_or(o.acceptable_kappa_tol);

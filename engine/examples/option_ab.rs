@@ -3,7 +3,7 @@
 //! range) runs with option value A, and every step is also solved from the same state with
 //! value B. `cargo run --release -p ukemi-engine --example option_ab -- MODEL.xml STEPS SEED
 //! OPTION A B` (SEED `default`: `step_bench`'s controls without a seed), OPTION one of
-//! `acceptable_iter`, `stall_iter`, `endgame_iter`, `max_iter`, `kappa_tol`, `rtol`, `cone_gap`, `activation_margin`, `drop_redundant_friction`, `warm_start_widening`, `warm_start_margin`, `tau_min`, `tau_max`, `undercut`. Prints, for A and B, the total iterations and seconds, the slowest step, failed
+//! `acceptable_iter`, `stall_iter`, `endgame_iter`, `max_iter`, `kappa_tol`, `rtol`, `cone_gap`, `activation_margin`, `drop_redundant_friction`, `warm_start_widening`, `warm_start_margin`, `tau_min`, `tau_max`, `undercut`, `friction_proximal`. Prints, for A and B, the total iterations and seconds, the slowest step, failed
 //! steps, and the largest difference of the next states' positions (m); with `AB_VERBOSE=1`
 //! every step whose positions differ by more than 1e-7 m, with the energies before and after.
 #![allow(clippy::print_stdout)]
@@ -29,6 +29,7 @@ fn with(model: &Model, option: &str, value: f64) -> Model {
         "warm_start_widening" => o.warm_start_widening = value,
         "warm_start_margin" => o.warm_start_margin = value,
         "tau_min" => o.tau_min = value,
+        "friction_proximal" => o.friction_proximal = value,
         "tau_max" => o.tau_max = value,
         "undercut" => o.undercut = value,
         _ => panic!("unknown option {option}"),

@@ -473,6 +473,9 @@ pub struct Workspace {
     /// Whether the last interior-point attempt ended stalled near convergence
     /// (`Options::acceptable_iter`): its acceptable iterate ends the solve without retries.
     pub(crate) stalled_near: bool,
+    /// The proximal term `ρ` on the friction impulses in the Newton matrix
+    /// (`Options::friction_proximal`; 0 outside a hard interior-point solve).
+    pub(crate) proximal: f64,
     /// The left-out candidates' pairs modelled in the mean complementarity (none but in the
     /// third activation tier, see `FarPairs`).
     pub(crate) far: crate::solver::inequality::FarPairs,
@@ -797,6 +800,7 @@ impl Workspace {
             trace_condition: false,
             attempt: 0,
             stalled_near: false,
+            proximal: 0.0,
             far: Default::default(),
             every_candidate: false,
             gentle_widening: false,

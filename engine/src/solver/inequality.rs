@@ -554,6 +554,7 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             &w[o..o + dim],
             nt,
             ws.saturated[c],
+            ws.proximal,
             &mut ws.matrix.values[diag..diag + dim * dim],
         );
         let (now, slip) = ws.contact_step[c].get(contact.radii());
@@ -629,6 +630,7 @@ fn contact_diag(
     x: &[f64],
     nt: Option<&NtScaling>,
     saturated: Option<Hold>,
+    rho: f64,
     d: &mut [f64],
 ) {
     let dim = model.dim();
@@ -645,6 +647,12 @@ fn contact_diag(
         ContactModel::Nonlinear => {
             set(2, 2, 1.0); // ξ₁ - μγ
             set(2, 0, -mu);
+            if saturated.is_none() {
+                // the proximal term on the friction impulses (`Options::friction_proximal`):
+                // matrix only, the residual rows stay η₂:₃ - v_t
+                set(6, 3, -rho);
+                set(7, 4, -rho);
+            }
             // ξ ∘ η: row 3 = ξᵀη; rows 4,5 = ξ₁ η₂:₃ + η₁ ξ₂:₃
             for i in 0..3 {
                 set(3, 2 + i, x[5 + i]);

@@ -216,6 +216,11 @@ pub(crate) fn solve_to(
         let mu0 = mean_complementarity(model, &ws.active, &ws.w, &ws.delta_aff, 0.0)
             + ws.far.mean(model, 0.0);
         ws.nt_on = o.nt_scaling && !ws.nt_disabled && mu0 > NT_MU_FLOOR;
+        // (hard solves only: a central-path solve's matrix is the gradients' `R̄`)
+        ws.proximal = match central {
+            None => o.friction_proximal * mu0,
+            Some(_) => 0.0,
+        };
         if ws.nt_on {
             update_scalings(model, ws);
             scale_soc_rows(model, ws, false, 0.0);
@@ -343,6 +348,7 @@ pub(crate) fn solve_to(
         }
     }
     ws.nt_on = false;
+    ws.proximal = 0.0;
     let stalled = matches!(
         report.status,
         SolveStatus::LineSearchFailed | SolveStatus::MaxIterations
