@@ -161,6 +161,18 @@ def test_warm_start_margin_is_an_option_and_validated(pend):
         assert np.abs(tr.qvel[-100:]).max() < 1e-8
 
 
+def _thrown_box():
+    """A 0.2 m box on a free joint, thrown tilted and spinning onto a floor (μ = 0.8), and its
+    start state."""
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("floor", body="world", shape="plane", friction=0.8)
+    b.add_body("box", mass=1.0, inertia=(0.01, 0.01, 0.01), pos=(0, 0, 0.3))
+    b.add_joint("free", kind="floating", parent="world", child="box")
+    b.add_geom("g", body="box", shape="box", size=(0.1, 0.1, 0.1), friction=0.8)
+    m = b.compile()
+    return m, m.make_state(qpos=[0, 0, 0.3, 0.9659, 0.2588, 0, 0], qvel=[0.5, 0, 0, 0, 0, 2.0])
+
+
 def test_warm_start_widening_is_an_option_and_validated(pend):
     # bad values name the field; a box dropped onto the floor lands and comes to rest, on the
     # same surface, whatever the widening of its warm starts (it changes only the solver's path)
@@ -168,13 +180,7 @@ def test_warm_start_widening_is_an_option_and_validated(pend):
         with pytest.raises(ValueError, match="warm_start_widening"):
             pend.with_options(warm_start_widening=bad)
     assert pend.options["warm_start_widening"] == 1e-2
-    b = ukemi.ModelBuilder(timestep=0.01)
-    b.add_geom("floor", body="world", shape="plane", friction=0.8)
-    b.add_body("box", mass=1.0, inertia=(0.01, 0.01, 0.01), pos=(0, 0, 0.3))
-    b.add_joint("free", kind="floating", parent="world", child="box")
-    b.add_geom("g", body="box", shape="box", size=(0.1, 0.1, 0.1), friction=0.8)
-    m = b.compile()
-    s0 = m.make_state(qpos=[0, 0, 0.3, 0.9659, 0.2588, 0, 0], qvel=[0.5, 0, 0, 0, 0, 2.0])
+    m, s0 = _thrown_box()
     ends = []
     for widening in (1e-3, 1e-2, 1e-1):
         tr = ukemi.rollout(m.with_options(warm_start_widening=widening), s0, nsteps=300)
@@ -194,13 +200,7 @@ def test_friction_proximal_is_an_option_and_leaves_solutions_alone(pend):
         with pytest.raises(ValueError, match="friction_proximal"):
             pend.with_options(friction_proximal=bad)
     assert pend.options["friction_proximal"] == 1e-2
-    b = ukemi.ModelBuilder(timestep=0.01)
-    b.add_geom("floor", body="world", shape="plane", friction=0.8)
-    b.add_body("box", mass=1.0, inertia=(0.01, 0.01, 0.01), pos=(0, 0, 0.3))
-    b.add_joint("free", kind="floating", parent="world", child="box")
-    b.add_geom("g", body="box", shape="box", size=(0.1, 0.1, 0.1), friction=0.8)
-    m = b.compile()
-    s0 = m.make_state(qpos=[0, 0, 0.3, 0.9659, 0.2588, 0, 0], qvel=[0.5, 0, 0, 0, 0, 2.0])
+    m, s0 = _thrown_box()
     runs = [ukemi.rollout(m.with_options(friction_proximal=p), s0, nsteps=150)
             for p in (0.0, 1e-2, 1e4)]
     assert all(tr.converged for tr in runs)
