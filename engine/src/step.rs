@@ -217,9 +217,9 @@ fn attempts(
 /// `activation_margin = inf`; the shared Panda's step 782 under `step_bench` seed 1 (a
 /// fingertip pad's corner pressed into the floor with ~330 N) spent 1400 iterations in the
 /// tiers (up to 686 candidates active) and converges in 46 all-active (844 → 195 ms for the
-/// step). The tiers come second because some steps converge only there: the Panda's step 135
+/// step). The tiers stay as the second pass: when they came first, the Panda's step 135
 /// under session 25's Table V controls (fingers closing onto their limits and each other
-/// while a pad slides on the floor) converged in 141 tiered iterations; random scene 701's
+/// while a pad slides on the floor) converged there in 141 iterations. Random scene 701's
 /// long solves converge to energy-gaining roots and are refused.
 pub(crate) fn long_solve(
     model: &Model,

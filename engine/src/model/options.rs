@@ -117,7 +117,7 @@ pub struct Options {
     /// converges; only the directions change. Default 0.01; 0 turns it off. Why: the shared
     /// Panda with its fingertip pads pressed into the floor by ~900 N (`option_ab panda.xml
     /// 1000 10`, step 452) failed every tier and sub-step, and its last resort's all-active
-    /// attempts (835 candidates) took 8.4 s; with it, 0.9 s on the same state. (Central-path
+    /// attempts (835 candidates) took 8.4 s; with it, 1.1 s on the same state. (Central-path
     /// solves, whose matrix is the gradients', take none.)
     pub friction_proximal: f64,
     /// Regularisation `ε` on constraint pivots, `-ε I`: keeps redundant constraints of closed
