@@ -104,7 +104,9 @@ fn lu_column(a: &mut [f64], n: usize, c: usize, piv: &mut [usize]) -> bool {
         // l_rc = a_rc / u_cc;  a_r,c+1.. -= l_rc * u_c,c+1..
         let l = row_r[c] / pivot;
         row_r[c] = l;
-        axpy_neg(&mut row_r[c + 1..], l, &row_c[c + 1..n]);
+        if l != 0.0 {
+            axpy_neg(&mut row_r[c + 1..], l, &row_c[c + 1..n]);
+        }
     }
     true
 }
@@ -294,7 +296,10 @@ fn lu_solve_left_matrix_sized(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64]
         let (top, bottom) = x.split_at_mut(i * ncols);
         let row_i = &mut bottom[..ncols];
         for (k, row_k) in top.chunks_exact(ncols).enumerate() {
-            axpy_neg(row_i, lu[i * n + k], row_k);
+            let l = lu[i * n + k];
+            if l != 0.0 {
+                axpy_neg(row_i, l, row_k);
+            }
         }
     }
     // U Z = Y: row_i = (row_i - Σ_{k>i} u_ik row_k) / u_ii
@@ -305,7 +310,10 @@ fn lu_solve_left_matrix_sized(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64]
             .chunks_exact(ncols)
             .enumerate()
         {
-            axpy_neg(row_i, lu[i * n + i + 1 + j], row_k);
+            let u = lu[i * n + i + 1 + j];
+            if u != 0.0 {
+                axpy_neg(row_i, u, row_k);
+            }
         }
         let inv = 1.0 / lu[i * n + i];
         row_i.iter_mut().for_each(|v| *v *= inv);
