@@ -110,8 +110,9 @@ pub struct Options {
     pub tau_min: f64,
     /// Fraction-to-boundary ceiling for second-order cones, τ_max. Default 0.99.
     pub tau_max: f64,
-    /// Proximal regularisation of the friction impulses in the interior-point Newton matrix,
-    /// relative to the mean complementarity `μ` of the iterate: the slip rows of the matrix
+    /// Proximal regularisation of the friction impulses (of the second-order friction cones;
+    /// the pyramid model's rows are unchanged) in the interior-point Newton matrix, relative to
+    /// the mean complementarity `μ` of the iterate: the slip rows of the matrix
     /// become `Δη₂:₃ - J_t Δv - ρ Δξ₂:₃` with `ρ = friction_proximal · μ`, while the residual
     /// stays exact, so a converged solution is the same and `ρ` vanishes as the solve
     /// converges; only the directions change. Default 0.01; 0 turns it off. Why: the shared
