@@ -191,6 +191,23 @@ def test_warm_start_widening_is_an_option_and_validated(pend):
     np.testing.assert_allclose(ends, 0.1, atol=1e-8)
 
 
+def test_warm_start_widening_weight_is_an_option_and_scales_with_the_model(pend):
+    # bad values name the field; the relative widening changes only the solver's path: the
+    # thrown box comes to rest on a face, 0.1 m up, whatever its weight-relative widening
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="warm_start_widening_weight"):
+            pend.with_options(warm_start_widening_weight=bad)
+    assert pend.options["warm_start_widening_weight"] == 0.1
+    m, s0 = _thrown_box()
+    ends = []
+    for weight in (0.0, 0.1, 3.0):
+        tr = ukemi.rollout(m.with_options(warm_start_widening_weight=weight), s0, nsteps=300)
+        assert tr.converged
+        assert np.abs(tr.qvel[-20:]).max() < 1e-6
+        ends.append(tr.qpos[-1, 2])
+    np.testing.assert_allclose(ends, 0.1, atol=1e-8)
+
+
 def test_friction_proximal_is_an_option_and_leaves_solutions_alone(pend):
     # bad values name the field; the proximal friction term changes only the solver's
     # directions (the residual stays exact): a box thrown spinning onto the floor follows the

@@ -472,6 +472,7 @@ impl PyModel {
             ("undercut", o.undercut),
             ("warm_start_margin", o.warm_start_margin),
             ("warm_start_widening", o.warm_start_widening),
+            ("warm_start_widening_weight", o.warm_start_widening_weight),
             ("regularization", o.regularization),
             ("friction_proximal", o.friction_proximal),
             ("activation_margin", o.activation_margin),
@@ -515,7 +516,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, regularization=None, friction_proximal=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, warm_start_widening_weight=None, regularization=None, friction_proximal=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -536,6 +537,7 @@ impl PyModel {
         warm_start: Option<Bound<'_, PyAny>>,
         warm_start_margin: Option<f64>,
         warm_start_widening: Option<f64>,
+        warm_start_widening_weight: Option<f64>,
         regularization: Option<f64>,
         friction_proximal: Option<f64>,
         kappa_grad: Option<f64>,
@@ -594,6 +596,8 @@ impl PyModel {
             o.warm_start = flag("warm_start", warm_start, o.warm_start)?;
             o.warm_start_margin = warm_start_margin.unwrap_or(o.warm_start_margin);
             o.warm_start_widening = warm_start_widening.unwrap_or(o.warm_start_widening);
+            o.warm_start_widening_weight =
+                warm_start_widening_weight.unwrap_or(o.warm_start_widening_weight);
             o.nt_scaling = flag("nt_scaling", nt_scaling, o.nt_scaling)?;
             o.central_warm_start = flag(
                 "central_warm_start",

@@ -30,6 +30,7 @@ fn with(model: &Model, option: &str, value: f64) -> Model {
         "warm_start_margin" => o.warm_start_margin = value,
         "tau_min" => o.tau_min = value,
         "friction_proximal" => o.friction_proximal = value,
+        "warm_start_widening_weight" => o.warm_start_widening_weight = value,
         "tau_max" => o.tau_max = value,
         "undercut" => o.undercut = value,
         _ => panic!("unknown option {option}"),

@@ -152,6 +152,7 @@ fn the_pandas_finger_pad_stalls_end_early_on_the_same_states() {
     // and no proximal friction term (session 31: with it fewer steps stall, 6101 → 5958
     // iterations with the early stop instead of 6200 → 5960)
     o.warm_start_widening = 1e-3;
+    o.warm_start_widening_weight = 0.0;
     o.friction_proximal = 0.0;
     let early = early.with_options(o.clone()).unwrap();
     o.acceptable_iter = 0;

@@ -36,6 +36,14 @@ fn stalled_attempts_end_early_and_the_steps_still_converge() {
     let Some(early) = workload::shared("panda") else {
         return;
     };
+    // (the widening this stall was found with: relative to the weight, session 31's default,
+    // the run's longest stall is 39 iterations)
+    let early = early
+        .with_options(ukemi_engine::Options {
+            warm_start_widening_weight: 0.0,
+            ..early.options.clone()
+        })
+        .unwrap();
     assert_eq!(early.options.stall_iter, 20);
     let mut o = early.options.clone();
     o.stall_iter = 0;

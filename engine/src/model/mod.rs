@@ -110,6 +110,13 @@ pub struct Model {
 }
 
 impl Model {
+    /// The impulse the moving bodies' weight delivers in one step, `Σ m g h` (N·s): the scale
+    /// of a step's contact impulses.
+    pub fn weight_impulse(&self) -> f64 {
+        let mass: f64 = self.bodies.iter().skip(1).map(|b| b.mass).sum();
+        mass * self.options.gravity.norm() * self.options.timestep
+    }
+
     /// Number of bodies including the world.
     pub fn nbody(&self) -> usize {
         self.bodies.len()

@@ -106,6 +106,12 @@ pub struct Options {
     /// (1e-3 until session 29: 6-10% more iterations on the humanoid and A1). A first attempt
     /// so widened that fails is retried widened by 1e-3 before anything else.
     pub warm_start_widening: f64,
+    /// The same widening relative to the impulse the moving bodies' weight delivers in a step,
+    /// `Σ m g h` (`Model::weight_impulse`): a warm start is widened by the larger of the two.
+    /// Default 0.1 (the shared humanoid: 0.40 N·s; a 1 kg box: 0.0098 N·s, below the absolute
+    /// 1e-2); 0 leaves the absolute widening alone (BENCHMARKS.md, session 31: −5..−9% iterations
+    /// on the robots, +1.7% on the random stress scenes).
+    pub warm_start_widening_weight: f64,
     /// Fraction-to-boundary floor for orthant variables, τ_min. Default 0.95.
     pub tau_min: f64,
     /// Fraction-to-boundary ceiling for second-order cones, τ_max. Default 0.99.
@@ -206,6 +212,7 @@ impl Default for Options {
             max_ls: 10,
             regularization: 1e-12,
             friction_proximal: 0.01,
+            warm_start_widening_weight: 0.1,
             kappa_tol: 1e-11,
             acceptable_rtol: 1e-8,
             acceptable_kappa_tol: 1e-8,
@@ -273,6 +280,14 @@ impl Options {
             Error::model(
                 "friction_proximal",
                 self.friction_proximal,
+                "must be finite and >= 0"
+            )
+        );
+        ensure!(
+            self.warm_start_widening_weight.is_finite() && self.warm_start_widening_weight >= 0.0,
+            Error::model(
+                "warm_start_widening_weight",
+                self.warm_start_widening_weight,
                 "must be finite and >= 0"
             )
         );

@@ -860,7 +860,7 @@ fn solve_active(
     // from `squat` followed the same iterates from the eighth iteration on, 50 iterations per tier)
     let warm_is_cold = at_neutral_point(model, ws);
     let mut report = super::ipm::solve(model, state, ws);
-    let gentler = model.options.warm_start_widening > super::ipm::WIDEN_IMPULSE_GENTLE;
+    let gentler = super::ipm::widening(model) > super::ipm::WIDEN_IMPULSE_GENTLE;
     if !report.status.is_success() && ws.widened && ws.attempt == 0 && gentler {
         // the widened warm start failed: once more from the warm start widened gently
         // (`ipm::WIDEN_IMPULSE_GENTLE`)
