@@ -173,38 +173,26 @@ def _thrown_box():
     return m, m.make_state(qpos=[0, 0, 0.3, 0.9659, 0.2588, 0, 0], qvel=[0.5, 0, 0, 0, 0, 2.0])
 
 
-def test_warm_start_widening_is_an_option_and_validated(pend):
-    # bad values name the field; a box dropped onto the floor lands and comes to rest, on the
+@pytest.mark.parametrize("name, bad, default, values", [
+    ("warm_start_widening", (0.0, -1e-2, float("nan"), float("inf")), 1e-2, (1e-3, 1e-2, 1e-1)),
+    # relative to the model's weight impulse Σ m g h (the larger of the two is taken)
+    ("warm_start_widening_weight", (-0.1, float("nan"), float("inf")), 0.1, (0.0, 0.1, 3.0)),
+])
+def test_warm_start_widening_is_an_option_and_validated(pend, name, bad, default, values):
+    # bad values name the field; a box thrown onto the floor lands and comes to rest, on the
     # same surface, whatever the widening of its warm starts (it changes only the solver's path)
-    for bad in (0.0, -1e-2, float("nan"), float("inf")):
-        with pytest.raises(ValueError, match="warm_start_widening"):
-            pend.with_options(warm_start_widening=bad)
-    assert pend.options["warm_start_widening"] == 1e-2
+    for b in bad:
+        with pytest.raises(ValueError, match=name):
+            pend.with_options(**{name: b})
+    assert pend.options[name] == default
     m, s0 = _thrown_box()
     ends = []
-    for widening in (1e-3, 1e-2, 1e-1):
-        tr = ukemi.rollout(m.with_options(warm_start_widening=widening), s0, nsteps=300)
+    for v in values:
+        tr = ukemi.rollout(m.with_options(**{name: v}), s0, nsteps=300)
         assert tr.converged
         assert np.abs(tr.qvel[-20:]).max() < 1e-6
         ends.append(tr.qpos[-1, 2])
     # at rest on a face: the centre 0.1 m above the floor
-    np.testing.assert_allclose(ends, 0.1, atol=1e-8)
-
-
-def test_warm_start_widening_weight_is_an_option_and_scales_with_the_model(pend):
-    # bad values name the field; the relative widening changes only the solver's path: the
-    # thrown box comes to rest on a face, 0.1 m up, whatever its weight-relative widening
-    for bad in (-0.1, float("nan"), float("inf")):
-        with pytest.raises(ValueError, match="warm_start_widening_weight"):
-            pend.with_options(warm_start_widening_weight=bad)
-    assert pend.options["warm_start_widening_weight"] == 0.1
-    m, s0 = _thrown_box()
-    ends = []
-    for weight in (0.0, 0.1, 3.0):
-        tr = ukemi.rollout(m.with_options(warm_start_widening_weight=weight), s0, nsteps=300)
-        assert tr.converged
-        assert np.abs(tr.qvel[-20:]).max() < 1e-6
-        ends.append(tr.qpos[-1, 2])
     np.testing.assert_allclose(ends, 0.1, atol=1e-8)
 
 
