@@ -403,12 +403,11 @@ pub struct BlockMatrix {
     assembled: Vec<f64>,
     /// Three node-ordered scratch vectors for [`solve_refined`](Self::solve_refined).
     refine: [Vec<f64>; 3],
-    /// Per stored block: whether it holds a nonzero, as assembled (`assembled_nz`) and in the
-    /// factors (`nz`, grown by the Schur updates). Blocks that stay zero are skipped by the
-    /// factorisation and the solves: fill created for contact candidates that are inactive
-    /// this step (e.g. between the limbs of a humanoid) costs nothing.
+    /// Per stored block: whether it holds a nonzero in the factors (grown by the Schur
+    /// updates). Blocks that stay zero are skipped by the factorisation and the solves: fill
+    /// created for contact candidates that are inactive this step (e.g. between the limbs of a
+    /// humanoid) costs nothing.
     nz: Vec<bool>,
-    assembled_nz: Vec<bool>,
     /// What the last [`factor`](Self::factor) left in (boxed: a workspace is moved around
     /// by value).
     live: Box<Live>,
@@ -434,6 +433,8 @@ struct Live {
     blocks: Vec<(usize, usize)>,
     /// Their row ranges (adjacent nodes merged).
     rows: Vec<Range<usize>>,
+    /// Whether the last factorisation kept `blocks` (see [`BlockMatrix::factor_keeping`]).
+    refinable: bool,
     /// Scratch of the factorisation: positions among a step's later neighbours `i` with
     /// `A_ik ≠ 0` and `j` with `U_kj ≠ 0`.
     update_rows: Vec<usize>,
@@ -452,7 +453,6 @@ impl BlockMatrix {
             assembled: vec![0.0; p.nvalues()],
             refine: std::array::from_fn(|_| vec![0.0; p.total_dim()]),
             nz: vec![true; p.nblocks()],
-            assembled_nz: vec![true; p.nblocks()],
             live: Box::new(Live {
                 nodes: (0..p.nnodes()).collect(),
                 steps: (0..p.steps.len()).collect(),
@@ -464,6 +464,7 @@ impl BlockMatrix {
                 rows: Vec::with_capacity(p.nnodes()),
                 update_rows: Vec::with_capacity(p.nnodes()),
                 update_cols: Vec::with_capacity(p.nnodes()),
+                refinable: true,
             }),
         }
     }
@@ -603,6 +604,10 @@ impl BlockMatrix {
     /// Only the rows of nodes that are not skipped take part: a skipped node's solution entries
     /// are its right-hand side, so its residual rows are exactly zero and its corrections too.
     pub fn solve_refined(&mut self, p: &BlockPattern, b: &mut [f64], rounds: usize, enough: f64) {
+        if !self.live.refinable {
+            self.solve(p, b);
+            return;
+        }
         let [mut rhs, mut res, mut step] = std::mem::take(&mut self.refine);
         let rows = std::mem::take(&mut self.live.rows);
         let mut scale = 0.0f64;
@@ -698,12 +703,24 @@ impl BlockMatrix {
     /// Returns `Err(node)` if the (Schur-complemented) diagonal block of `node` is singular
     /// or not finite; the values are then partially factored and must be reassembled.
     pub fn factor(&mut self, p: &BlockPattern) -> Result<(), usize> {
+        self.factor_keeping(p, true)
+    }
+
+    /// [`factor`](Self::factor) without keeping a copy of the matrix as assembled when
+    /// `refinable` is false: the next solves are then not refined ([`solve_refined`] solves
+    /// once). For callers that know no solve with this factorisation will be refined: copying
+    /// the assembled blocks was 3.5% of a humanoid step, and the interior-point loop refines
+    /// only near its solution (`ipm::REFINE_BELOW`).
+    ///
+    /// [`solve_refined`]: Self::solve_refined
+    pub fn factor_keeping(&mut self, p: &BlockPattern, refinable: bool) -> Result<(), usize> {
         self.refresh_live(p);
         // keep the nonzero blocks of the nodes not skipped as assembled, for `solve_refined`
         // (a skipped node's row keeps the identity's `nz` from `set_skipped`)
         let live = &mut *self.live;
         live.blocks.clear();
         live.rows.clear();
+        live.refinable = refinable;
         for &i in &live.nodes {
             let rows = p.offsets[i]..p.offsets[i + 1];
             match live.rows.last_mut() {
@@ -721,13 +738,12 @@ impl BlockMatrix {
                 let block = &self.values[range.clone()];
                 // NaN != 0: a non-finite block is kept and reported by the factorisation
                 self.nz[idx] = block.iter().any(|&v| v != 0.0);
-                if self.nz[idx] {
+                if self.nz[idx] && refinable {
                     self.assembled[range.clone()].copy_from_slice(&self.values[range]);
                     live.blocks.push((i, idx));
                 }
             }
         }
-        self.assembled_nz.copy_from_slice(&self.nz);
         for s in self.live.steps.iter().map(|&k| &p.steps[k]) {
             let dk = s.dim;
             let piv = &mut self.pivots[s.row..s.row + dk];

@@ -249,7 +249,10 @@ pub(crate) fn solve_to(
         } else {
             f64::NAN
         };
-        if ws.matrix.factor(p).is_err() {
+        // far from the solution no direction is refined (see `REFINE_BELOW`; the plain
+        // direction after a failed line search neither): no copy of the matrix to refine with
+        let refine = vio.r <= REFINE_BELOW || vio.k <= REFINE_BELOW;
+        if ws.matrix.factor_keeping(p, refine).is_err() {
             report.status = SolveStatus::NonFinite;
             break;
         }
@@ -290,7 +293,7 @@ pub(crate) fn solve_to(
         let merit = live_norm2(model, &ws.active, &ws.residual);
         load_residual(model, &ws.active, &ws.residual, &mut ws.delta, 1.0);
         add_mehrotra_correction(model, ws);
-        if vio.r > REFINE_BELOW && vio.k > REFINE_BELOW {
+        if !refine {
             let delta = &mut ws.delta;
             for_each_live_range(model, &ws.active, |r| {
                 delta[r].iter_mut().for_each(|d| *d = -*d)
