@@ -133,7 +133,7 @@ def test_iteration_counts_reject_negative_values_by_name(pend):
 def test_switch_options_must_be_bools_and_are_named(pend):
     # 1, "yes" or None-like strings would be silent typos: a TypeError that names the option
     for name in ("warm_start", "nt_scaling", "central_warm_start", "cone_gap",
-                 "drop_redundant_friction"):
+                 "drop_redundant_friction", "pyramid_fallback"):
         for bad in ("yes", 1, 0.0):
             with pytest.raises(TypeError, match=name):
                 pend.with_options(**{name: bad})
@@ -233,6 +233,9 @@ def test_round_off_stall_is_acceptable_and_reported(pend):
     """An unreachable rtol stalls on round-off: status "acceptable" (a valid state, reported
     with its true residual) within acceptable_rtol; a failure when acceptance is off."""
     assert ukemi.STATUS_NAMES[:2] == ("converged", "acceptable")
+    # the codes of the failures stay 2-4; the pyramid friction cones' valid state is last
+    assert ukemi.STATUS_NAMES[5] == "pyramid_friction"
+    assert ukemi.SUCCESS_STATUSES == ("converged", "acceptable", "pyramid_friction")
     s0 = pend.make_state(qpos=[1.0], qvel=[3.0])
     ref, _ = ukemi.step(pend, s0)
     strict = pend.with_options(rtol=1e-300)

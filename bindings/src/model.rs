@@ -516,7 +516,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, warm_start_widening_weight=None, regularization=None, friction_proximal=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, pyramid_fallback=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, warm_start_widening_weight=None, regularization=None, friction_proximal=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -532,6 +532,7 @@ impl PyModel {
         stall_iter: Option<i64>,
         cone_gap: Option<Bound<'_, PyAny>>,
         drop_redundant_friction: Option<Bound<'_, PyAny>>,
+        pyramid_fallback: Option<Bound<'_, PyAny>>,
         max_ls: Option<i64>,
         undercut: Option<f64>,
         warm_start: Option<Bound<'_, PyAny>>,
@@ -586,6 +587,7 @@ impl PyModel {
                 drop_redundant_friction,
                 o.drop_redundant_friction,
             )?;
+            o.pyramid_fallback = flag("pyramid_fallback", pyramid_fallback, o.pyramid_fallback)?;
             o.max_ls = count("max_ls", max_ls, o.max_ls)?;
             o.regularization = regularization.unwrap_or(o.regularization);
             o.friction_proximal = friction_proximal.unwrap_or(o.friction_proximal);

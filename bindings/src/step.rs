@@ -12,7 +12,8 @@ use crate::state::PyState;
 #[pyclass(name = "StepInfo", module = "ukemi._ukemi", frozen, get_all)]
 #[derive(Clone)]
 pub struct PyStepInfo {
-    /// "converged" | "acceptable" | "max_iterations" | "line_search_failed" | "non_finite".
+    /// "converged" | "acceptable" | "max_iterations" | "line_search_failed" | "non_finite" |
+    /// "pyramid_friction".
     pub status: &'static str,
     /// Newton iterations.
     pub iterations: usize,
@@ -27,11 +28,12 @@ pub struct PyStepInfo {
 
 #[pymethods]
 impl PyStepInfo {
-    /// Whether the state is valid: the solve converged, or reached the acceptable tolerances
-    /// (status "acceptable").
+    /// Whether the state is valid: the solve converged, reached the acceptable tolerances
+    /// (status "acceptable"), or converged with pyramid friction cones after the exact cones
+    /// failed (status "pyramid_friction", option `pyramid_fallback`).
     #[getter]
     fn converged(&self) -> bool {
-        matches!(self.status, "converged" | "acceptable")
+        matches!(self.status, "converged" | "acceptable" | "pyramid_friction")
     }
     fn __repr__(&self) -> String {
         format!(

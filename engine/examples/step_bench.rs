@@ -6,7 +6,7 @@
 //! Prints the best-of-`REPEATS` ms/step, the IPM iterations per step (mean, median, max, and
 //! the mean with each step capped at 100, which the rare stalled steps do not dominate), the
 //! share of the run's time spent in its slowest 1% of steps, the
-//! steps that were not converged or were subdivided, the mean active contact candidates, and a fingerprint of the final state (bits
+//! steps that were not converged, were taken with pyramid friction cones or were subdivided, the mean active contact candidates, and a fingerprint of the final state (bits
 //! of every position, orientation and velocity) to check that a speed change kept the physics
 //! bit for bit.
 #![allow(clippy::print_stdout)]
@@ -40,7 +40,7 @@ fn main() {
         let ctrls: Vec<Vec<f64>> = (0..steps).map(|_| controls.next(&model)).collect();
         let (mut its, mut failed, mut subdivided, mut active, mut loaded) =
             (Vec::new(), 0, 0, 0, 0);
-        let mut limits = 0;
+        let (mut limits, mut pyramid) = (0, 0);
         let mut times = Vec::with_capacity(steps);
         let mut per_step = Vec::with_capacity(steps);
         let t0 = Instant::now();
@@ -52,6 +52,7 @@ fn main() {
             its.push(r.iterations);
             failed += usize::from(!r.status.is_success());
             subdivided += usize::from(r.subdivisions > 1);
+            pyramid += usize::from(r.status == ukemi_engine::SolveStatus::PyramidFriction);
             active += ws.active_contacts();
             limits += ws.active_limits();
             loaded += state
@@ -80,13 +81,15 @@ fn main() {
             }
         }
         let slow = times.iter().take(steps.div_ceil(100)).sum::<f64>() / times.iter().sum::<f64>();
-        last = Some((its, failed, subdivided, active, loaded, limits, print, slow));
+        last = Some((
+            its, failed, subdivided, active, loaded, limits, print, slow, pyramid,
+        ));
     }
-    let (mut its, failed, subdivided, active, loaded, limits, print, slow) = last.unwrap();
+    let (mut its, failed, subdivided, active, loaded, limits, print, slow, pyramid) = last.unwrap();
     let total: usize = its.iter().sum();
     its.sort_unstable();
     println!(
-        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {} (capped at 100: mean {:.2}); slowest 1% of steps {:.0}% of the time; unconverged {failed}, subdivided {subdivided}; active candidates {:.1} of {} ({:.1} with a normal impulse); limited joints active {:.1}; state fingerprint {print:016x}",
+        "{path}: {steps} steps, {:.3} ms/step (best of {repeats}); iterations/step mean {:.2} median {} max {} (capped at 100: mean {:.2}); slowest 1% of steps {:.0}% of the time; unconverged {failed}, pyramid friction {pyramid}, subdivided {subdivided}; active candidates {:.1} of {} ({:.1} with a normal impulse); limited joints active {:.1}; state fingerprint {print:016x}",
         1e3 * best / steps as f64,
         total as f64 / steps as f64,
         its[steps / 2],

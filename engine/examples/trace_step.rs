@@ -9,7 +9,8 @@
 //! step's controls from FILE, one step per line, separated by commas or white space (e.g. a Python
 //! run's controls written with `np.savetxt(FILE, ctrls, delimiter=",")`). `UKEMI_TRACE_WHOLE=1`
 //! takes the traced step without sub-steps, so that the whole step's attempts are the ones
-//! traced; `UKEMI_TRACE_LOADED=1` lists the candidates that end the step with a normal impulse.
+//! traced; `UKEMI_TRACE_LOADED=1` lists the candidates that end the step with a normal impulse,
+//! `UKEMI_TRACE_GAPS=1` those within 1 mm of contact (or penetrating) at its start.
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{Workspace, step};
 
@@ -73,6 +74,32 @@ fn main() {
         } else {
             &model
         };
+        if k == which && std::env::var("UKEMI_TRACE_GAPS").is_ok() {
+            // the candidates within 1 mm (or penetrating) at the start of the traced step
+            let phi = ukemi_engine::contact::signed_distances(&model, &state);
+            for (c, d) in phi.iter().enumerate().filter(|(_, d)| **d < 1e-3) {
+                let ct = &model.contacts[c];
+                let (a, b) = (&model.geoms[ct.geom_a].name, &model.geoms[ct.geom_b].name);
+                println!("  start: candidate {c} {a} / {b}: signed distance {d:.3e} m");
+            }
+        }
+        if k == which && std::env::var("UKEMI_TRACE_LINEAR").is_ok() {
+            // the traced step with pyramid friction cones instead of the exact ones
+            use ukemi_engine::ContactModel::{Linear, Nonlinear};
+            let lin = m.with_contact_model(Nonlinear, Linear).unwrap();
+            let mut s = state.moved_to(&lin);
+            let mut w = Workspace::new(&lin);
+            let t = std::time::Instant::now();
+            let r = step(&lin, &mut s, &mut w, &ctrl).unwrap();
+            println!(
+                "linear friction: {:?}, {} iterations, {} sub-steps, residual {:.2e}, {:.1} ms",
+                r.status,
+                r.iterations,
+                r.subdivisions,
+                r.residual,
+                t.elapsed().as_secs_f64() * 1e3
+            );
+        }
         let r = step(m, &mut state, &mut ws, &ctrl).unwrap();
         if k < which && r.iterations > 100 {
             println!(

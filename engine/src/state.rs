@@ -102,6 +102,47 @@ impl State {
         s
     }
 
+    /// This state's motion (poses, velocities, joint impulses, time) as a state of `model`, a
+    /// model with the same bodies and joints (e.g. [`Model::with_contact_model`]); the
+    /// inequality variables start from `model`'s neutral point.
+    pub fn moved_to(&self, model: &Model) -> State {
+        let mut s = State::reference(model);
+        s.copy_motion_from(self);
+        s.joint_impulse.copy_from_slice(&self.joint_impulse);
+        s
+    }
+
+    /// `other`, a state of `pyramid` (this state's model `model` with its second-order friction
+    /// cones as pyramids, [`Model::with_contact_model`]), written into this state: motion and
+    /// joint impulses as they are; each pyramid candidate's impulse `(γ, β₁ - β₂, β₃ - β₄)` as
+    /// the cone's `ξ = (μγ, β₁ - β₂, β₃ - β₄)` (inside the cone: the pyramid is inscribed),
+    /// and its slip `(ψ, v_t)` (`η_k = ψ ± v_t·t`) as the cone's dual `η`; limits unchanged.
+    /// What the next step warm-starts from and `contact_impulse` reports.
+    pub(crate) fn take_pyramid(&mut self, model: &Model, pyramid: &Model, other: &State) {
+        use crate::contact::ContactModel::{Linear, Nonlinear};
+        self.copy_motion_from(other);
+        self.joint_impulse.copy_from_slice(&other.joint_impulse);
+        let (mut k, mut j) = (0, 0);
+        for (c, p) in model.contacts.iter().zip(&pyramid.contacts) {
+            let (me, x) = (
+                &mut self.ineq_vars[k..k + c.model.dim()],
+                &other.ineq_vars[j..j + p.model.dim()],
+            );
+            if (c.model, p.model) == (Nonlinear, Linear) {
+                let xi = [c.friction * x[0], x[4] - x[5], x[6] - x[7]];
+                let eta = [x[2], 0.5 * (x[8] - x[9]), 0.5 * (x[10] - x[11])];
+                me[..2].copy_from_slice(&x[..2]);
+                me[2..5].copy_from_slice(&xi);
+                me[5..].copy_from_slice(&eta);
+            } else {
+                me.copy_from_slice(x);
+            }
+            k += c.model.dim();
+            j += p.model.dim();
+        }
+        self.ineq_vars[k..].copy_from_slice(&other.ineq_vars[j..]);
+    }
+
     /// COM pose of body `b`.
     pub fn pose(&self, b: usize) -> Pose {
         Pose {
@@ -284,6 +325,13 @@ pub enum SolveStatus {
     LineSearchFailed,
     /// A NaN or infinity appeared (or a pivot was singular).
     NonFinite,
+    /// Every attempt with the exact friction cones failed and the step converged with each
+    /// cone replaced by its inscribed four-sided pyramid (`Options::pyramid_fallback`). A
+    /// success: no penetration, contact forces inside the Coulomb cones, residual to `rtol` (of
+    /// the pyramid problem); a sliding contact's friction direction is the pyramid's. Not
+    /// differentiable: the gradients, linearising the exact cones, report such a step as
+    /// unconverged.
+    PyramidFriction,
 }
 
 impl SolveStatus {
@@ -295,23 +343,31 @@ impl SolveStatus {
             SolveStatus::MaxIterations => "max_iterations",
             SolveStatus::LineSearchFailed => "line_search_failed",
             SolveStatus::NonFinite => "non_finite",
+            SolveStatus::PyramidFriction => "pyramid_friction",
         }
     }
-    /// Small integer code (0 = converged, 1 = acceptable, larger = failure), for status arrays.
+    /// Small integer code for status arrays: 0 = converged, 1 = acceptable, 2-4 = failures,
+    /// 5 = pyramid friction (valid, not differentiable; last so that the earlier codes keep
+    /// their meaning).
     pub fn code(self) -> u8 {
         self as u8
     }
     /// Every status in code order.
-    pub const ALL: [SolveStatus; 5] = [
+    pub const ALL: [SolveStatus; 6] = [
         SolveStatus::Converged,
         SolveStatus::Acceptable,
         SolveStatus::MaxIterations,
         SolveStatus::LineSearchFailed,
         SolveStatus::NonFinite,
+        SolveStatus::PyramidFriction,
     ];
-    /// Whether the step's state is valid: converged, or solved to the acceptable level.
+    /// Whether the step's state is valid: converged, solved to the acceptable level, or
+    /// converged with pyramid friction cones.
     pub fn is_success(self) -> bool {
-        matches!(self, SolveStatus::Converged | SolveStatus::Acceptable)
+        matches!(
+            self,
+            SolveStatus::Converged | SolveStatus::Acceptable | SolveStatus::PyramidFriction
+        )
     }
 }
 

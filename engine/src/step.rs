@@ -94,43 +94,112 @@ pub fn step_with(
     // * the exact problem: no friction held by `drop_redundant_friction`'s shortcuts (the
     //   humanoid's seed-13 step 127, `tests/hard_steps.rs`, fails every attempt with them and
     //   converges without);
+    // * the step with pyramid friction cones, then the exact cones warm-started from its
+    //   impulses (`Options::pyramid_fallback`): the humanoid's seed-155 step 188 jams the
+    //   exact cones from the previous step's impulses and converges from the pyramid's;
     // * the start rebuilt from its minimal coordinates (joint drift and velocities off the
     //   joints' motion subspaces projected out, what `rollout_vjp` and the flat JAX/torch
     //   layers step from): the humanoid's seed-97 step 53 jams from its exact start on every
-    //   problem and converges from the rebuilt one.
+    //   problem and converges from the rebuilt one;
+    // * the pyramid's step itself, reported as `PyramidFriction`.
+    // (`crate::gradients` takes the same decisions up to the rebuilt start.)
     let start = ws.start.clone();
-    let exact = match model.options.drop_redundant_friction {
-        true => Some(model.with_options(crate::Options {
-            drop_redundant_friction: false,
-            ..model.options.clone()
-        })?),
-        false => None,
-    };
-    let rebuilt = rebuilt(model, &start)?;
-    // (the exact problem from the rebuilt start too rescued no step found so far, and a step
-    // that nothing solves spent a quarter of its ~6000 iterations on it)
-    let tries = exact
-        .iter()
-        .map(|m| (m, &start))
-        .chain(rebuilt.iter().map(|r| (model, r)));
     let mut iterations = report.iterations;
-    for (m, from) in tries {
+    let mut tried = |m: &Model, from: &State, ws: &mut Workspace, state: &mut State| {
         let mut next = from.clone();
         let retry = attempts(m, &mut next, ws, ctrl, forces)?;
         iterations += retry.iterations;
-        if retry.status.is_success() {
+        let done = retry.status.is_success().then(|| {
             *state = next;
-            return Ok(StepReport {
+            StepReport {
                 iterations,
                 ..retry
+            }
+        });
+        Result::Ok(done)
+    };
+    if model.options.drop_redundant_friction {
+        let exact = model.with_options(crate::Options {
+            drop_redundant_friction: false,
+            ..model.options.clone()
+        })?;
+        if let Some(done) = tried(&exact, &start, ws, state)? {
+            return Ok(done);
+        }
+    }
+    let pyramid = pyramid_step(model, &start, ctrl, forces)?;
+    let pyramid_iterations = pyramid.as_ref().map_or(0, |(_, r)| r.iterations);
+    if let Some((mapped, _)) = &pyramid {
+        let warm = warm_started_from(&start, mapped);
+        if let Some(done) = tried(model, &warm, ws, state)? {
+            return Ok(StepReport {
+                iterations: done.iterations + pyramid_iterations,
+                ..done
             });
         }
     }
+    // (the exact problem from the rebuilt start too rescued no step found so far, and a step
+    // that nothing solves spent a quarter of its ~6000 iterations on it)
+    if let Some(rebuilt) = rebuilt(model, &start)?
+        && let Some(done) = tried(model, &rebuilt, ws, state)?
+    {
+        return Ok(StepReport {
+            iterations: done.iterations + pyramid_iterations,
+            ..done
+        });
+    }
     ws.start = start;
-    Ok(StepReport {
-        iterations,
-        ..report
+    let iterations = iterations + pyramid_iterations;
+    Ok(match pyramid {
+        Some((mapped, pr)) => {
+            *state = mapped;
+            StepReport {
+                status: SolveStatus::PyramidFriction,
+                iterations,
+                ..pr
+            }
+        }
+        None => StepReport {
+            iterations,
+            ..report
+        },
     })
+}
+
+/// The step from `start` with each second-order friction cone replaced by its inscribed
+/// four-sided pyramid (the `linear` contact model), through the same attempts as any step
+/// (whole, subdivisions, long solve): `start` written as the exact model's state with the
+/// pyramid's next state's motion and impulses ([`State::take_pyramid`]) and the report, or
+/// `None` when it fails too, the option is off or the model has no cones.
+pub(crate) fn pyramid_step(
+    model: &Model,
+    start: &State,
+    ctrl: &[f64],
+    forces: &AppliedForces,
+) -> Result<Option<(State, StepReport)>> {
+    use crate::contact::ContactModel::{Linear, Nonlinear};
+    let cones = model.contacts.iter().any(|c| c.model == Nonlinear);
+    if !model.options.pyramid_fallback || !cones {
+        return Ok(None);
+    }
+    let lin = model.with_contact_model(Nonlinear, Linear)?;
+    let mut next = start.moved_to(&lin);
+    let report = attempts(&lin, &mut next, &mut Workspace::new(&lin), ctrl, forces)?;
+    if !report.status.is_success() {
+        return Ok(None);
+    }
+    let mut mapped = start.clone();
+    mapped.take_pyramid(model, &lin, &next);
+    Ok(Some((mapped, report)))
+}
+
+/// `start` with the impulses (joint, contact and limit variables) of `solution` as its warm
+/// start: where an exact-cone solve that jammed from the previous step's impulses begins again.
+pub(crate) fn warm_started_from(start: &State, solution: &State) -> State {
+    let mut warm = start.clone();
+    warm.ineq_vars.copy_from_slice(&solution.ineq_vars);
+    warm.joint_impulse.copy_from_slice(&solution.joint_impulse);
+    warm
 }
 
 /// `state` rebuilt from its minimal coordinates by forward kinematics, or `None` when that
@@ -715,5 +784,101 @@ mod tests {
             .unwrap();
         let report = step(&whole, &mut state, &mut Workspace::new(&whole), &[]).unwrap();
         assert_eq!(report.subdivisions, 1);
+    }
+
+    /// The pyramid last resort on a 1 kg box sliding on the floor (μ = 0.5). The pyramid's
+    /// step ([`pyramid_step`]) is the pyramid model's own step, with its impulses (inside the
+    /// exact cone) in the exact model's layout; the floor's tangents are world x and y, so
+    /// sliding along x the inscribed pyramid's friction is the cone's, `μ m g h` a step, and
+    /// along the diagonal `μ m g h / √2` (the pyramid's edge), against the slip. The exact
+    /// cones warm-started from the pyramid's impulses ([`warm_started_from`]) land on the exact
+    /// step.
+    #[test]
+    fn the_pyramid_last_resort_slides_a_box_by_the_inscribed_pyramid() {
+        use crate::contact::ContactModel::{Linear, Nonlinear};
+        use crate::{GeomSpec, Shape};
+        let (h, mu, g) = (0.01, 0.5, 9.81);
+        let model = ModelBuilder::new()
+            .timestep(h)
+            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(mu))
+            .body(BodySpec::new("box", 1.0, [0.1, 0.1, 0.1]).pos([0.0, 0.0, 0.1]))
+            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
+            .geom(
+                GeomSpec::new(
+                    "box",
+                    "box",
+                    Shape::Box {
+                        half_extents: Vector3::new(0.1, 0.1, 0.1),
+                    },
+                )
+                .friction(mu),
+            )
+            .compile()
+            .unwrap();
+        let lin = model.with_contact_model(Nonlinear, Linear).unwrap();
+        assert!(lin.contacts.iter().all(|c| c.model == Linear));
+        let forces = AppliedForces::default();
+        for (dir, share) in [
+            (Vector3::new(1.0, 0.0, 0.0), 1.0),
+            (Vector3::new(1.0, 1.0, 0.0).normalize(), 0.5f64.sqrt()),
+        ] {
+            // sliding at 2 m/s, resting on the floor (one exact step settles the impulses)
+            let mut start = State::reference(&model);
+            start.set_velocity(1, &(2.0 * dir), &Vector3::zeros());
+            let mut ws = Workspace::new(&model);
+            assert!(
+                step(&model, &mut start, &mut ws, &[])
+                    .unwrap()
+                    .status
+                    .is_success()
+            );
+            let v0 = start.velocity(1).0;
+            // the pyramid's step, and the pyramid model's own step from the same start
+            let (mapped, r) = pyramid_step(&model, &start, &[], &forces).unwrap().unwrap();
+            assert_eq!(r.status, SolveStatus::Converged);
+            let mut direct = start.moved_to(&lin);
+            let rd = step(&lin, &mut direct, &mut Workspace::new(&lin), &[]).unwrap();
+            assert_eq!(rd.status, SolveStatus::Converged);
+            assert_eq!(mapped.com_pos, direct.com_pos);
+            assert_eq!(mapped.com_linvel, direct.com_linvel);
+            assert_eq!(mapped.contact_impulse(&model), direct.contact_impulse(&lin));
+            let dv = mapped.velocity(1).0 - v0;
+            let expect = -mu * g * h * share * dir;
+            assert!((dv - expect).norm() < 1e-8, "{dv:?} vs {expect:?}");
+            for (c, f) in mapped.contact_impulse(&model).chunks(3).enumerate() {
+                let tangential = (f[1] * f[1] + f[2] * f[2]).sqrt();
+                assert!(
+                    tangential <= mu * f[0] * (1.0 + 1e-12),
+                    "candidate {c}: {f:?}"
+                );
+            }
+            // the last resort: the exact cones from the pyramid's impulses, the exact step
+            let mut exact = start.clone();
+            step(&model, &mut exact, &mut ws, &[]).unwrap();
+            let mut next = warm_started_from(&start, &mapped);
+            assert_eq!(next.contact_impulse(&model), mapped.contact_impulse(&model));
+            let r = attempts(&model, &mut next, &mut ws, &[], &forces).unwrap();
+            assert_eq!(r.status, SolveStatus::Converged);
+            let dv = next.velocity(1).0 - v0;
+            assert!((dv + mu * g * h * dir).norm() < 1e-8, "{dv:?}");
+            assert!((next.pose(1).pos - exact.pose(1).pos).norm() < 1e-10);
+            // and the exact cones go on from the pyramid's state
+            let mut after = mapped.clone();
+            let r = step(&model, &mut after, &mut ws, &[]).unwrap();
+            assert_eq!(r.status, SolveStatus::Converged);
+            let dv = after.velocity(1).0 - mapped.velocity(1).0;
+            assert!((dv + mu * g * h * dir).norm() < 1e-8, "{dv:?}");
+        }
+        // switched off, or without cones: no last resort
+        let off = model
+            .with_options(crate::Options {
+                pyramid_fallback: false,
+                ..model.options.clone()
+            })
+            .unwrap();
+        let s = State::reference(&off);
+        assert!(pyramid_step(&off, &s, &[], &forces).unwrap().is_none());
+        let s = State::reference(&lin);
+        assert!(pyramid_step(&lin, &s, &[], &forces).unwrap().is_none());
     }
 }

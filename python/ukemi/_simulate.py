@@ -11,9 +11,12 @@ from ._convert import as_float_array
 from .errors import ConvergenceError
 
 STATUS_NAMES: tuple[str, ...] = tuple(_ukemi.STATUS_NAMES)
-#: statuses whose state is valid: "converged", and "acceptable" (the solve stalled on round-off
-#: within the options' acceptable_rtol / acceptable_kappa_tol)
-SUCCESS_STATUSES: tuple[str, ...] = ("converged", "acceptable")
+#: statuses whose state is valid: "converged", "acceptable" (the solve stalled on round-off
+#: within the options' acceptable_rtol / acceptable_kappa_tol), and "pyramid_friction" (every
+#: attempt with the exact friction cones failed and the step converged with each cone replaced
+#: by its inscribed four-sided pyramid: no penetration, forces inside the Coulomb cones; not
+#: differentiable, see the ``pyramid_fallback`` option)
+SUCCESS_STATUSES: tuple[str, ...] = ("converged", "acceptable", "pyramid_friction")
 SUCCESS = SUCCESS_STATUSES
 _ON_FAILURE = ("raise", "return")
 
@@ -138,7 +141,7 @@ class Trajectory:
 
     @property
     def converged(self) -> bool:
-        """Whether every step's state is valid (status "converged" or "acceptable")."""
+        """Whether every step's state is valid (status in ``SUCCESS_STATUSES``)."""
         return bool(np.all(np.isin(self.status, SUCCESS)))
 
 

@@ -385,8 +385,10 @@ def _status_fn(model, kappa, with_params, how):
 def step_with_status(model, x, u=None, params=None, kappa_grad=3e-4, *, convert=False):
     """:func:`step` that reports instead of failing: returns ``(x_next, status)`` with
     ``status`` (...,) int32 in ``ukemi.STATUS_NAMES`` order (0 = converged, 1 = acceptable:
-    both valid states; 2 and above = failures). A step that failed returns its last iterate
-    with its status, so a jitted program can mask or reset it (``status > 1``). ``x_next`` is differentiable like :func:`step` (the backward pass of a failed
+    both valid states; 2-4 = failures; 5 = pyramid_friction: a valid state taken with
+    pyramid friction cones after the exact cones failed, with no gradient). A step that failed
+    returns its last iterate with its status, so a jitted program can mask or reset it
+    (``status > 1`` masks every step without a valid gradient). ``x_next`` is differentiable like :func:`step` (the backward pass of a failed
     step raises, as there is no valid gradient there)."""
     k, x, u, p = _prep(model, x, u, params, kappa_grad, convert, ("x", "u"))
     nx, nu, npar = _sizes(model)

@@ -35,8 +35,8 @@ use crate::model::params::Param;
 use crate::solver::newton;
 use crate::state::{State, StepReport, Workspace};
 use crate::step::{
-    AppliedForces, energy_ceiling, long_solve, rotation_substeps, subdivided_with, substep_model,
-    suspect,
+    AppliedForces, energy_ceiling, long_solve, pyramid_step, rotation_substeps, subdivided_with,
+    substep_model, suspect, warm_started_from,
 };
 use crate::{Result, ensure};
 
@@ -69,7 +69,8 @@ impl StoredSubsteps {
 /// further than `max_step_rotation`), else taken as
 /// sub-steps when `max_subdivisions` allows and a subdivision succeeds, else kept if it
 /// converged, else (with `drop_redundant_friction`) all of that again on the exact problem,
-/// else an error. A kept whole step's solution is in `ws` (as after its solve) and
+/// else all of that from the impulses of the step with pyramid friction cones
+/// (`Options::pyramid_fallback`), else an error. A kept whole step's solution is in `ws` (as after its solve) and
 /// in the returned [`StoredSolution`].
 pub(crate) fn retry(
     model: &Model,
@@ -79,19 +80,35 @@ pub(crate) fn retry(
     whole: StepReport,
 ) -> Result<StoredStep> {
     let error = match attempts(model, state, ws, ctrl, whole) {
-        Err(e) if model.options.drop_redundant_friction => e,
+        Err(e) => e,
         kept => return kept,
     };
-    // as `crate::step` does last of all: the exact problem, without the friction that
+    // as `crate::step` does after that: the exact problem, without the friction that
     // `drop_redundant_friction` holds (its solution then holds none of it, and is linearised
     // as such)
-    let exact = model.with_options(crate::Options {
-        drop_redundant_friction: false,
-        ..model.options.clone()
-    })?;
-    newton::prepare(&exact, state, ws, ctrl, &AppliedForces::default());
-    let report = newton::solve(&exact, state, ws);
-    attempts(&exact, state, ws, ctrl, report).map_err(|_| error)
+    if model.options.drop_redundant_friction {
+        let exact = model.with_options(crate::Options {
+            drop_redundant_friction: false,
+            ..model.options.clone()
+        })?;
+        newton::prepare(&exact, state, ws, ctrl, &AppliedForces::default());
+        let report = newton::solve(&exact, state, ws);
+        if let Ok(kept) = attempts(&exact, state, ws, ctrl, report) {
+            return Ok(kept);
+        }
+    }
+    // then the exact cones warm-started from the impulses of the step with pyramid cones (the
+    // warm start changes where the solve begins, not the problem: linearised as any step)
+    let none = AppliedForces::default();
+    if let Some((pyramid, _)) = pyramid_step(model, state, ctrl, &none)? {
+        let warm = warm_started_from(state, &pyramid);
+        newton::prepare(model, &warm, ws, ctrl, &none);
+        let report = newton::solve(model, &warm, ws);
+        if let Ok(kept) = attempts(model, &warm, ws, ctrl, report) {
+            return Ok(kept);
+        }
+    }
+    Err(error)
 }
 
 /// [`retry`] with the options of `model` only.

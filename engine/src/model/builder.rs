@@ -1055,7 +1055,7 @@ fn joint_frame_at_reference(joint: &Joint, bodies: &[Body]) -> JointFrame {
 
 /// Each moving body must be the child of exactly one tree joint, and following parent joints
 /// from any body must reach the world.
-fn spanning_tree(bodies: &[Body], joints: &[Joint]) -> Result<Vec<Option<usize>>> {
+pub(super) fn spanning_tree(bodies: &[Body], joints: &[Joint]) -> Result<Vec<Option<usize>>> {
     let mut parent_joint: Vec<Option<usize>> = vec![None; bodies.len()];
     for (j, joint) in joints.iter().enumerate().filter(|(_, j)| !j.is_loop) {
         if let Some(other) = parent_joint[joint.child] {

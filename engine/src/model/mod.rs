@@ -152,6 +152,31 @@ impl Model {
         m.options = options;
         Ok(m)
     }
+    /// The same model with the contact candidates of friction model `from` modelled as `to`
+    /// (the topology recompiled: its states do not carry over, see
+    /// [`crate::State::moved_to`]).
+    pub fn with_contact_model(
+        &self,
+        from: crate::contact::ContactModel,
+        to: crate::contact::ContactModel,
+    ) -> crate::Result<Model> {
+        let mut m = self.clone();
+        for c in m.contacts.iter_mut().filter(|c| c.model == from) {
+            c.model = to;
+        }
+        let parent_joint = builder::spanning_tree(&m.bodies, &m.joints)?;
+        m.topology = Topology::new(
+            m.bodies.len(),
+            &m.joints,
+            &parent_joint,
+            &m.geoms,
+            &m.contacts,
+            &m.couplings,
+            &m.tendon_limits,
+        )
+        .map_err(|e| crate::Error::model("joints", "graph", e))?;
+        Ok(m)
+    }
     /// Number of contact candidates.
     pub fn ncontact(&self) -> usize {
         self.contacts.len()

@@ -92,6 +92,19 @@ pub struct Options {
     /// A1 −14..−18% iterations, humanoid −5..−9%). A step that fails every attempt with these
     /// shortcuts is taken once more without them (`step::step_with`).
     pub drop_redundant_friction: bool,
+    /// A step whose every attempt with the exact (second-order) friction cones fails is taken
+    /// with each cone replaced by the four-sided pyramid inscribed in it (the `linear` contact
+    /// model, Dojo's LCP form), and the exact cones are solved again warm-started from the
+    /// pyramid's impulses; the step is exact when that converges. When it does not (and the
+    /// start rebuilt from its minimal coordinates fails too), the pyramid's step is returned as
+    /// [`crate::SolveStatus::PyramidFriction`]: no penetration, every contact force inside its
+    /// Coulomb cone, but a sliding contact's friction along the pyramid's nearest edge instead
+    /// of against the slip, and no gradients. Default true; false reports such a step as
+    /// failed. Why: the shared humanoid with its legs crossed and a foot sliding
+    /// (`step_bench humanoid.xml 1000 1 155`, step 188) jams the exact cones from the previous
+    /// step's impulses on every attempt (~3100 iterations, then unconverged); the pyramid
+    /// converges in ~20 iterations and the exact cones from its impulses in ~10.
+    pub pyramid_fallback: bool,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
     /// Start contact and limit variables from the previous step's solution (pushed
@@ -220,6 +233,7 @@ impl Default for Options {
             stall_iter: 20,
             cone_gap: true,
             drop_redundant_friction: true,
+            pyramid_fallback: true,
             undercut: 10.0,
             warm_start: true,
             warm_start_margin: 1e-6,
