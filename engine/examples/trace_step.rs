@@ -10,7 +10,9 @@
 //! run's controls written with `np.savetxt(FILE, ctrls, delimiter=",")`). `UKEMI_TRACE_WHOLE=1`
 //! takes the traced step without sub-steps, so that the whole step's attempts are the ones
 //! traced; `UKEMI_TRACE_LOADED=1` lists the candidates that end the step with a normal impulse,
-//! `UKEMI_TRACE_GAPS=1` those within 1 mm of contact (or penetrating) at its start.
+//! `UKEMI_TRACE_GAPS=1` those within 1 mm of contact (or penetrating) at its start, and
+//! `UKEMI_TRACE_LINEAR=1` takes the traced step also with pyramid friction cones and then with
+//! the exact cones warm-started from the pyramid's impulses (`step::pyramid_step`).
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{Workspace, step};
 
@@ -99,6 +101,22 @@ fn main() {
                 r.residual,
                 t.elapsed().as_secs_f64() * 1e3
             );
+            // and the exact cones warm-started from the pyramid's impulses
+            let forces = ukemi_engine::AppliedForces::default();
+            if let Some((mapped, _)) =
+                ukemi_engine::step::pyramid_step(m, &state, &ctrl, &forces).unwrap()
+            {
+                let mut warm = ukemi_engine::step::warm_started_from(&state, &mapped);
+                let t = std::time::Instant::now();
+                let r = step(m, &mut warm, &mut Workspace::new(m), &ctrl).unwrap();
+                println!(
+                    "exact from the pyramid's impulses: {:?}, {} iterations, {} sub-steps, {:.1} ms",
+                    r.status,
+                    r.iterations,
+                    r.subdivisions,
+                    t.elapsed().as_secs_f64() * 1e3
+                );
+            }
         }
         let r = step(m, &mut state, &mut ws, &ctrl).unwrap();
         if k < which && r.iterations > 100 {

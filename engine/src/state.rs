@@ -118,7 +118,7 @@ impl State {
     /// the cone's `ξ = (μγ, β₁ - β₂, β₃ - β₄)` (inside the cone: the pyramid is inscribed),
     /// and its slip `(ψ, v_t)` (`η_k = ψ ± v_t·t`) as the cone's dual `η`; limits unchanged.
     /// What the next step warm-starts from and `contact_impulse` reports.
-    pub(crate) fn take_pyramid(&mut self, model: &Model, pyramid: &Model, other: &State) {
+    pub fn take_pyramid(&mut self, model: &Model, pyramid: &Model, other: &State) {
         use crate::contact::ContactModel::{Linear, Nonlinear};
         self.copy_motion_from(other);
         self.joint_impulse.copy_from_slice(&other.joint_impulse);

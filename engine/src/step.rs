@@ -171,7 +171,7 @@ pub fn step_with(
 /// (whole, subdivisions, long solve): `start` written as the exact model's state with the
 /// pyramid's next state's motion and impulses ([`State::take_pyramid`]) and the report, or
 /// `None` when it fails too, the option is off or the model has no cones.
-pub(crate) fn pyramid_step(
+pub fn pyramid_step(
     model: &Model,
     start: &State,
     ctrl: &[f64],
@@ -195,7 +195,7 @@ pub(crate) fn pyramid_step(
 
 /// `start` with the impulses (joint, contact and limit variables) of `solution` as its warm
 /// start: where an exact-cone solve that jammed from the previous step's impulses begins again.
-pub(crate) fn warm_started_from(start: &State, solution: &State) -> State {
+pub fn warm_started_from(start: &State, solution: &State) -> State {
     let mut warm = start.clone();
     warm.ineq_vars.copy_from_slice(&solution.ineq_vars);
     warm.joint_impulse.copy_from_slice(&solution.joint_impulse);
