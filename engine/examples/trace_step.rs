@@ -103,10 +103,10 @@ fn main() {
             );
             // and the exact cones warm-started from the pyramid's impulses
             let forces = ukemi_engine::AppliedForces::default();
-            if let Some((mapped, _)) =
-                ukemi_engine::step::pyramid_step(m, &state, &ctrl, &forces).unwrap()
+            let pyramid = ukemi_engine::step::pyramid_step(m, &state, &ctrl, &forces).unwrap();
+            if let Some(mut warm) =
+                pyramid.and_then(|(p, _)| ukemi_engine::step::warm_started_from(&state, &p))
             {
-                let mut warm = ukemi_engine::step::warm_started_from(&state, &mapped);
                 let t = std::time::Instant::now();
                 let r = step(m, &mut warm, &mut Workspace::new(m), &ctrl).unwrap();
                 println!(

@@ -96,7 +96,8 @@ pub fn step_with(
     //   converges without);
     // * the step with pyramid friction cones, then the exact cones warm-started from its
     //   impulses (`Options::pyramid_fallback`): the humanoid's seed-155 step 188 jams the
-    //   exact cones from the previous step's impulses and converges from the pyramid's;
+    //   exact cones from the previous step's impulses and converges from the pyramid's; its
+    //   seed-253 step 845 jams the pyramid too and converges from its last iterate's;
     // * the start rebuilt from its minimal coordinates (joint drift and velocities off the
     //   joints' motion subspaces projected out, what `rollout_vjp` and the flat JAX/torch
     //   layers step from): the humanoid's seed-97 step 53 jams from its exact start on every
@@ -129,14 +130,16 @@ pub fn step_with(
     }
     let pyramid = pyramid_step(model, &start, ctrl, forces)?;
     let pyramid_iterations = pyramid.as_ref().map_or(0, |(_, r)| r.iterations);
-    if let Some((mapped, _)) = &pyramid {
-        let warm = warm_started_from(&start, mapped);
-        if let Some(done) = tried(model, &warm, ws, state)? {
-            return Ok(StepReport {
-                iterations: done.iterations + pyramid_iterations,
-                ..done
-            });
-        }
+    let warm = pyramid
+        .as_ref()
+        .and_then(|(p, _)| warm_started_from(&start, p));
+    if let Some(warm) = warm
+        && let Some(done) = tried(model, &warm, ws, state)?
+    {
+        return Ok(StepReport {
+            iterations: done.iterations + pyramid_iterations,
+            ..done
+        });
     }
     // (the exact problem from the rebuilt start too rescued no step found so far, and a step
     // that nothing solves spent a quarter of its ~6000 iterations on it)
@@ -150,7 +153,7 @@ pub fn step_with(
     }
     ws.start = start;
     let iterations = iterations + pyramid_iterations;
-    Ok(match pyramid {
+    Ok(match pyramid.filter(|(_, pr)| pr.status.is_success()) {
         Some((mapped, pr)) => {
             *state = mapped;
             StepReport {
@@ -169,8 +172,9 @@ pub fn step_with(
 /// The step from `start` with each second-order friction cone replaced by its inscribed
 /// four-sided pyramid (the `linear` contact model), through the same attempts as any step
 /// (whole, subdivisions, long solve): `start` written as the exact model's state with the
-/// pyramid's next state's motion and impulses ([`State::take_pyramid`]) and the report, or
-/// `None` when it fails too, the option is off or the model has no cones.
+/// pyramid's next state's motion and impulses ([`State::take_pyramid`]) and the pyramid's
+/// report (a failed pyramid's last iterate too: still a warm start for the exact cones), or
+/// `None` when the option is off or the model has no cones.
 pub fn pyramid_step(
     model: &Model,
     start: &State,
@@ -185,9 +189,6 @@ pub fn pyramid_step(
     let lin = model.with_contact_model(Nonlinear, Linear)?;
     let mut next = start.moved_to(&lin);
     let report = attempts(&lin, &mut next, &mut Workspace::new(&lin), ctrl, forces)?;
-    if !report.status.is_success() {
-        return Ok(None);
-    }
     let mut mapped = start.clone();
     mapped.take_pyramid(model, &lin, &next);
     Ok(Some((mapped, report)))
@@ -195,11 +196,19 @@ pub fn pyramid_step(
 
 /// `start` with the impulses (joint, contact and limit variables) of `solution` as its warm
 /// start: where an exact-cone solve that jammed from the previous step's impulses begins again.
-pub fn warm_started_from(start: &State, solution: &State) -> State {
-    let mut warm = start.clone();
-    warm.ineq_vars.copy_from_slice(&solution.ineq_vars);
-    warm.joint_impulse.copy_from_slice(&solution.joint_impulse);
-    warm
+/// `None` when they are not all finite (a pyramid solve that failed with a NaN).
+pub fn warm_started_from(start: &State, solution: &State) -> Option<State> {
+    let finite = solution
+        .ineq_vars
+        .iter()
+        .chain(&solution.joint_impulse)
+        .all(|x| x.is_finite());
+    finite.then(|| {
+        let mut warm = start.clone();
+        warm.ineq_vars.copy_from_slice(&solution.ineq_vars);
+        warm.joint_impulse.copy_from_slice(&solution.joint_impulse);
+        warm
+    })
 }
 
 /// `state` rebuilt from its minimal coordinates by forward kinematics, or `None` when that
@@ -855,7 +864,7 @@ mod tests {
             // the last resort: the exact cones from the pyramid's impulses, the exact step
             let mut exact = start.clone();
             step(&model, &mut exact, &mut ws, &[]).unwrap();
-            let mut next = warm_started_from(&start, &mapped);
+            let mut next = warm_started_from(&start, &mapped).unwrap();
             assert_eq!(next.contact_impulse(&model), mapped.contact_impulse(&model));
             let r = attempts(&model, &mut next, &mut ws, &[], &forces).unwrap();
             assert_eq!(r.status, SolveStatus::Converged);

@@ -163,16 +163,14 @@ fn a_wedged_limb_retries_its_first_attempt_widened_gently() {
     assert_no_penetration(&model, &state);
 }
 
-/// Seed 155's step 188 under the default options (found in session 32; a solver change moves
-/// a chaotic trajectory's later states): the legs crossed, the right shin pressed on the left
-/// thigh, the right foot sliding. Every attempt with the exact cones from the previous step's
-/// impulses jams (~3100 iterations: residual ~1e-6, complementarity ~2e-4, step lengths
-/// ~1e-3); the step with pyramid friction cones converges (~20 iterations), and from its
-/// impulses the exact cones do (~10). The step is then exact (`Converged`), and
-/// `step_jacobians` takes the same decisions and lands on the same root.
-#[test]
-fn a_jammed_step_converges_from_the_pyramids_impulses() {
-    let Some((model, start, u)) = replay_with(155, 188, Model::clone) else {
+/// Steps of the humanoid under the default options (found in session 32; a solver change moves
+/// a chaotic trajectory's later states) that jam the exact cones from the previous step's
+/// impulses on every attempt, and converge with the exact cones warm-started from the impulses
+/// of the step with pyramid friction cones: `step` reports them `Converged`, no contact sinks,
+/// `step_jacobians` takes the same decisions and lands on the same root, and the exact cones
+/// take the steps after it.
+fn jammed_step_converges_from_the_pyramids_impulses(seed: u64, at: usize) {
+    let Some((model, start, u)) = replay_with(seed, at, Model::clone) else {
         return;
     };
     use ukemi_engine::SolveStatus;
@@ -205,11 +203,28 @@ fn a_jammed_step_converges_from_the_pyramids_impulses() {
     let (p, q) = (lin.next_state().pose(1).pos, state.pose(1).pos);
     assert!((p - q).norm() < 1e-9, "{p:?} vs {q:?}");
     // and the exact cones take the steps after it
-    let mut controls = workload::Controls::with_seed(155);
-    let ctrls: Vec<Vec<f64>> = (0..200).map(|_| controls.next(&model)).collect();
-    for (k, u) in ctrls.iter().enumerate().skip(189) {
+    let mut controls = workload::Controls::with_seed(seed);
+    let ctrls: Vec<Vec<f64>> = (0..at + 12).map(|_| controls.next(&model)).collect();
+    for (k, u) in ctrls.iter().enumerate().skip(at + 1) {
         let r = step(&model, &mut state, &mut ws, u).unwrap();
         assert!(r.status.is_success(), "step {k}: {r:?}");
         assert_no_penetration(&model, &state);
     }
+}
+
+/// Seed 155's step 188: the legs crossed, the right shin pressed on the left thigh, the right
+/// foot sliding. The exact cones jam (~3100 iterations: residual ~1e-6, complementarity ~2e-4,
+/// step lengths ~1e-3); the pyramid converges (~20 iterations), and from its impulses the exact
+/// cones (~10).
+#[test]
+fn a_jammed_step_converges_from_the_pyramids_impulses() {
+    jammed_step_converges_from_the_pyramids_impulses(155, 188);
+}
+
+/// Seed 253's step 845: the left shin loaded on the floor among ~15 sliding contacts. The
+/// pyramid jams too (4671 iterations, residual 4.9e-6), and from its last iterate's impulses the
+/// exact cones converge.
+#[test]
+fn a_step_that_jams_the_pyramid_too_converges_from_its_last_iterate() {
+    jammed_step_converges_from_the_pyramids_impulses(253, 845);
 }

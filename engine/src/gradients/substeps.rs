@@ -100,8 +100,8 @@ pub(crate) fn retry(
     // then the exact cones warm-started from the impulses of the step with pyramid cones (the
     // warm start changes where the solve begins, not the problem: linearised as any step)
     let none = AppliedForces::default();
-    if let Some((pyramid, _)) = pyramid_step(model, state, ctrl, &none)? {
-        let warm = warm_started_from(state, &pyramid);
+    let pyramid = pyramid_step(model, state, ctrl, &none)?;
+    if let Some(warm) = pyramid.and_then(|(p, _)| warm_started_from(state, &p)) {
         newton::prepare(model, &warm, ws, ctrl, &none);
         let report = newton::solve(model, &warm, ws);
         if let Ok(kept) = attempts(model, &warm, ws, ctrl, report) {

@@ -95,7 +95,8 @@ pub struct Options {
     /// A step whose every attempt with the exact (second-order) friction cones fails is taken
     /// with each cone replaced by the four-sided pyramid inscribed in it (the `linear` contact
     /// model, Dojo's LCP form), and the exact cones are solved again warm-started from the
-    /// pyramid's impulses; the step is exact when that converges. When it does not (and the
+    /// pyramid's impulses (a failed pyramid's last iterate's too); the step is exact when that
+    /// converges. When it does not (and the
     /// start rebuilt from its minimal coordinates fails too), the pyramid's step is returned as
     /// [`crate::SolveStatus::PyramidFriction`]: no penetration, every contact force inside its
     /// Coulomb cone, but a sliding contact's friction along the pyramid's nearest edge instead
@@ -103,7 +104,8 @@ pub struct Options {
     /// failed. Why: the shared humanoid with its legs crossed and a foot sliding
     /// (`step_bench humanoid.xml 1000 1 155`, step 188) jams the exact cones from the previous
     /// step's impulses on every attempt (~3100 iterations, then unconverged); the pyramid
-    /// converges in ~20 iterations and the exact cones from its impulses in ~10.
+    /// converges in ~20 iterations and the exact cones from its impulses in ~10 (seed 253's
+    /// step 845 jams the pyramid too, and converges from its last iterate's impulses).
     pub pyramid_fallback: bool,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
