@@ -805,25 +805,8 @@ mod tests {
     #[test]
     fn the_pyramid_last_resort_slides_a_box_by_the_inscribed_pyramid() {
         use crate::contact::ContactModel::{Linear, Nonlinear};
-        use crate::{GeomSpec, Shape};
         let (h, mu, g) = (0.01, 0.5, 9.81);
-        let model = ModelBuilder::new()
-            .timestep(h)
-            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(mu))
-            .body(BodySpec::new("box", 1.0, [0.1, 0.1, 0.1]).pos([0.0, 0.0, 0.1]))
-            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
-            .geom(
-                GeomSpec::new(
-                    "box",
-                    "box",
-                    Shape::Box {
-                        half_extents: Vector3::new(0.1, 0.1, 0.1),
-                    },
-                )
-                .friction(mu),
-            )
-            .compile()
-            .unwrap();
+        let model = crate::gradients::test_scenes::box_on_floor(h, mu);
         let lin = model.with_contact_model(Nonlinear, Linear).unwrap();
         assert!(lin.contacts.iter().all(|c| c.model == Linear));
         let forces = AppliedForces::default();

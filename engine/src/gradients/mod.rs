@@ -46,7 +46,7 @@ mod sparsity;
 mod substeps;
 pub mod tangent;
 #[cfg(test)]
-mod test_scenes;
+pub(crate) mod test_scenes;
 
 use std::time::Instant;
 

@@ -1,4 +1,4 @@
-//! Scenes and comparisons shared by the gradients' unit tests.
+//! Scenes and comparisons shared by the unit tests (the gradients', the solver's, the step's).
 use crate::{
     ActuatorSpec, BodySpec, GeomSpec, JointKind, JointSpec, Model, ModelBuilder, Shape, State,
     Workspace,
@@ -23,6 +23,20 @@ pub(crate) fn pushed_box() -> (Model, State) {
         crate::step(&m, &mut s, &mut ws, &[0.0]).unwrap();
     }
     (m, s)
+}
+
+/// A 1 kg box of half-size 0.1 m resting on the floor, friction `mu` on both, time step `h`
+/// (its candidates the default, exact friction cones).
+pub(crate) fn box_on_floor(h: f64, mu: f64) -> Model {
+    let half = nalgebra::Vector3::new(0.1, 0.1, 0.1);
+    ModelBuilder::new()
+        .timestep(h)
+        .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(mu))
+        .body(BodySpec::new("box", 1.0, [0.1, 0.1, 0.1]).pos([0.0, 0.0, 0.1]))
+        .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
+        .geom(GeomSpec::new("box", "box", Shape::Box { half_extents: half }).friction(mu))
+        .compile()
+        .unwrap()
 }
 
 /// The push at step `k` (N).

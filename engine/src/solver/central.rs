@@ -422,25 +422,8 @@ mod tests {
     /// and the velocities alone.
     #[test]
     fn unblock_centres_the_blocking_cones_only() {
-        use crate::contact::ContactModel;
-        use crate::{BodySpec, GeomSpec, JointKind, JointSpec, ModelBuilder, Shape};
-        let model = ModelBuilder::new()
-            .timestep(0.01)
-            .geom(GeomSpec::new("floor", "world", Shape::Plane).friction(0.8))
-            .body(BodySpec::new("box", 1.0, [0.1, 0.1, 0.1]).pos([0.0, 0.0, 0.1]))
-            .joint(JointSpec::new("free", JointKind::Floating, "world", "box"))
-            .geom(
-                GeomSpec::new(
-                    "box",
-                    "box",
-                    Shape::Box {
-                        half_extents: nalgebra::Vector3::new(0.1, 0.1, 0.1),
-                    },
-                )
-                .model(Some(ContactModel::Nonlinear)),
-            )
-            .compile()
-            .unwrap();
+        // (the exact cones: the default contact model)
+        let model = crate::gradients::test_scenes::box_on_floor(0.01, 0.8);
         let state = State::reference(&model);
         let mut ws = Workspace::new(&model);
         crate::solver::newton::prepare(&model, &state, &mut ws, &[], &Default::default());
