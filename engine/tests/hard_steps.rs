@@ -96,31 +96,41 @@ fn a_wedged_humanoid_step_converges() {
 
 /// Seed 13's step 127 from the exact state: the right knee at its limit, the foot folded
 /// against the thigh. Its whole solve, sub-steps and long solves all failed (~1100
-/// iterations) with the separated-friction holds of the first attempt; without them it
-/// converges (~200 iterations).
+/// iterations) with the separated-friction holds of the first attempt. It converges from the
+/// impulses of the step with pyramid friction cones (the last resort tried next), and, with
+/// that off (`pyramid_fallback`), on the exact problem without the holds (~200 iterations).
+/// Either way the gradients' forward pass decides the same way.
 #[test]
 fn a_folded_leg_step_converges() {
-    let Some((model, mut state, u)) = replay(13, 127) else {
+    let Some((model, start, u)) = replay(13, 127) else {
         return;
     };
-    // the gradients' forward pass decides the same way
-    let mut lin = Linearization::new(
-        &model,
-        &state,
-        &u,
-        Coordinates::Maximal,
-        Wrt::STATE_CTRL,
-        None,
-    )
-    .unwrap();
-    let jac = lin.jacobians(&model).unwrap();
-    assert!(jac.a.iter().chain(jac.b.iter()).all(|x| x.is_finite()));
-    let report = step(&model, &mut state, &mut Workspace::new(&model), &u).unwrap();
-    assert!(report.status.is_success(), "{report:?}");
-    // the same root both ways
-    let (p, q) = (lin.next_state().pose(1).pos, state.pose(1).pos);
-    assert!((p - q).norm() < 1e-9, "{p:?} vs {q:?}");
-    assert_no_penetration(&model, &state);
+    let off = model
+        .with_options(ukemi_engine::Options {
+            pyramid_fallback: false,
+            ..model.options.clone()
+        })
+        .unwrap();
+    for model in [model, off] {
+        let mut lin = Linearization::new(
+            &model,
+            &start,
+            &u,
+            Coordinates::Maximal,
+            Wrt::STATE_CTRL,
+            None,
+        )
+        .unwrap();
+        let jac = lin.jacobians(&model).unwrap();
+        assert!(jac.a.iter().chain(jac.b.iter()).all(|x| x.is_finite()));
+        let mut state = start.clone();
+        let report = step(&model, &mut state, &mut Workspace::new(&model), &u).unwrap();
+        assert!(report.status.is_success(), "{report:?}");
+        // the same root both ways
+        let (p, q) = (lin.next_state().pose(1).pos, state.pose(1).pos);
+        assert!((p - q).norm() < 1e-9, "{p:?} vs {q:?}");
+        assert_no_penetration(&model, &state);
+    }
 }
 
 /// Seed 97's step 53 from the exact state, with the warm-start widening it was found with

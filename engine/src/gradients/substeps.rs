@@ -68,10 +68,10 @@ impl StoredSubsteps {
 /// `whole`): kept when it converged and is not [`suspect`] (gained energy, or turned a body
 /// further than `max_step_rotation`), else taken as
 /// sub-steps when `max_subdivisions` allows and a subdivision succeeds, else kept if it
-/// converged, else (with `drop_redundant_friction`) all of that again on the exact problem,
-/// else all of that from the impulses of the step with pyramid friction cones
-/// (`Options::pyramid_fallback`), else an error. A kept whole step's solution is in `ws` (as after its solve) and
-/// in the returned [`StoredSolution`].
+/// converged, else all of that from the impulses of the step with pyramid friction cones
+/// (`Options::pyramid_fallback`), else (with `drop_redundant_friction`) all of that again on
+/// the exact problem, else an error. A kept whole step's solution is in `ws` (as after its
+/// solve) and in the returned [`StoredSolution`].
 pub(crate) fn retry(
     model: &Model,
     state: &State,
@@ -83,28 +83,28 @@ pub(crate) fn retry(
         Err(e) => e,
         kept => return kept,
     };
-    // as `crate::step` does after that: the exact problem, without the friction that
-    // `drop_redundant_friction` holds (its solution then holds none of it, and is linearised
-    // as such)
-    if model.options.drop_redundant_friction {
-        let exact = model.with_options(crate::Options {
-            drop_redundant_friction: false,
-            ..model.options.clone()
-        })?;
-        newton::prepare(&exact, state, ws, ctrl, &AppliedForces::default());
-        let report = newton::solve(&exact, state, ws);
-        if let Ok(kept) = attempts(&exact, state, ws, ctrl, report) {
-            return Ok(kept);
-        }
-    }
-    // then the exact cones warm-started from the impulses of the step with pyramid cones (the
-    // warm start changes where the solve begins, not the problem: linearised as any step)
+    // as `crate::step` does after that: the exact cones warm-started from the impulses of the
+    // step with pyramid cones (the warm start changes where the solve begins, not the problem:
+    // linearised as any step)
     let none = AppliedForces::default();
     let pyramid = pyramid_step(model, state, ctrl, &none)?;
     if let Some(warm) = pyramid.and_then(|(p, _)| warm_started_from(state, &p)) {
         newton::prepare(model, &warm, ws, ctrl, &none);
         let report = newton::solve(model, &warm, ws);
         if let Ok(kept) = attempts(model, &warm, ws, ctrl, report) {
+            return Ok(kept);
+        }
+    }
+    // then the exact problem, without the friction that `drop_redundant_friction` holds (its
+    // solution then holds none of it, and is linearised as such)
+    if model.options.drop_redundant_friction {
+        let exact = model.with_options(crate::Options {
+            drop_redundant_friction: false,
+            ..model.options.clone()
+        })?;
+        newton::prepare(&exact, state, ws, ctrl, &none);
+        let report = newton::solve(&exact, state, ws);
+        if let Ok(kept) = attempts(&exact, state, ws, ctrl, report) {
             return Ok(kept);
         }
     }
