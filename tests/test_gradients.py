@@ -391,3 +391,37 @@ def test_a_kept_step_linearises_as_a_fresh_solve_on_the_a1():
                                        err_msg=f"step {k}")
         x = x_next
     assert ukemi._ukemi._kept_rollouts()[0] == hits + len(us)
+
+
+def test_exact_jacobians_through_a_joint_limit_pressed_hard():
+    """The gymnasium ant under Table V's random controls (seed 0): at its states 0 and 3 a hip
+    presses its limit with γ ≈ 54 N·m·s at a slack of ~1e-14, and the exact Jacobians
+    (kappa_grad=None) failed: the factorisation came out singular (gradients::SLACK_FLOOR). They
+    now exist and match central differences of the hard step, B = ∂(qpos⁺, qvel⁺)/∂u."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = ukemi.Model.from_xml_path(ukemi.gymnasium_asset_path("ant")).with_options(timestep=0.01)
+    r = np.asarray(m.actuator_ctrlrange)
+    ctrls = r[:, 0] + (r[:, 1] - r[:, 0]) * np.random.default_rng(0).random((4, m.nu))
+    tr = ukemi.rollout(m, m.make_state(), ctrls)
+    nq = m.nq
+
+    def flat_step(x, u):
+        n, _ = ukemi.step(m, m.make_state(qpos=x[:nq], qvel=x[nq:]), u)
+        return np.concatenate([n.qpos, n.qvel])
+
+    for k in (0, 3):
+        x = np.concatenate([tr.qpos[k], tr.qvel[k]])
+        s = m.make_state(qpos=tr.qpos[k], qvel=tr.qvel[k])
+        B = np.asarray(ukemi.step_jacobians(m, s, ctrls[k], wrt=("state", "ctrl"),
+                                            kappa_grad=None).B)
+        eps = 1e-6
+        fd = np.zeros((2 * m.nv, m.nu))
+        for i in range(m.nu):
+            du = np.zeros(m.nu)
+            du[i] = eps
+            xp, xm = flat_step(x, ctrls[k] + du), flat_step(x, ctrls[k] - du)
+            # the velocity rows (the position rows' quaternion differences need the tangent map)
+            fd[m.nv:, i] = (xp[nq:] - xm[nq:]) / (2 * eps)
+        err = np.abs(B[m.nv:] - fd[m.nv:]).max() / np.abs(fd[m.nv:]).max()
+        assert err < 1e-6, (k, err)

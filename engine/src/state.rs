@@ -532,6 +532,10 @@ pub struct Workspace {
     /// The proximal term `ρ` on the friction impulses in the Newton matrix
     /// (`Options::friction_proximal`; 0 outside a hard interior-point solve).
     pub(crate) proximal: f64,
+    /// The least slack of an orthant complementarity pair in the Newton matrix relative to its
+    /// impulse, `s ≥ slack_floor · γ` (matrix only; 0 but in the gradients' factorisation at
+    /// κ = 0, see `gradients::SLACK_FLOOR`).
+    pub(crate) slack_floor: f64,
     /// The left-out candidates' pairs modelled in the mean complementarity (none but in the
     /// third activation tier, see `FarPairs`).
     pub(crate) far: crate::solver::inequality::FarPairs,
@@ -857,6 +861,7 @@ impl Workspace {
             attempt: 0,
             stalled_near: false,
             proximal: 0.0,
+            slack_floor: 0.0,
             far: Default::default(),
             every_candidate: false,
             gentle_widening: false,

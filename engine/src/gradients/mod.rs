@@ -185,6 +185,17 @@ fn next_state_into(model: &Model, state: &State, w: &[f64], out: &mut State) {
     out.time = state.time + h;
 }
 
+/// The least slack of an orthant pair (a contact's gap, a limit's distance) relative to its
+/// impulse in the gradients' Newton matrix, `s ≥ SLACK_FLOOR · γ` (the matrix only: the point
+/// and its residual are the solve's). Why: a pair pressed hard at the solution (the gymnasium
+/// ant's hip on its limit with γ = 54 N·m·s and s = 1.8e-14) gave the leaf-first elimination
+/// a pivot of `s` and Schur updates of `γ / s` ≈ 3e15 into its bodies, whose blocks then came
+/// out singular: 2 of the ant's first 20 Table V states had no exact Jacobians. With the floor
+/// they factor, and their `B` matches central differences of the hard step to 1e-7 relative
+/// (`∂v⁺/∂u`, floors 1e-8 / 1e-9 / 1e-10 / 1e-11: 1e-6, 1.5e-7, 1.4e-6, 1.6e-5: the floor
+/// against round-off in `γ / s`); states without such a pair are unchanged.
+pub(crate) const SLACK_FLOOR: f64 = 1e-9;
+
 /// The hard solve of one step from `state` in a fresh workspace; the report says whether it
 /// converged.
 fn solve_hard(model: &Model, state: &State, ctrl: &[f64]) -> Result<(Workspace, StepReport)> {
@@ -519,10 +530,16 @@ impl SolveLinearization {
         if !(evaluated && kappa == 0.0) {
             newton::evaluate(model, &point.state, &mut ws, false, kappa);
         }
+        ws.slack_floor = SLACK_FLOOR;
         newton::assemble(model, &mut ws);
-        if ws.matrix.factor(&model.topology.pattern).is_err() {
+        ws.slack_floor = 0.0;
+        if let Err(n) = ws.matrix.factor(&model.topology.pattern) {
+            let what = format!(
+                "factorisation of the Newton matrix at the gradient point (singular at {})",
+                model.node_name(n)
+            );
             return Err(not_converged(
-                "factorisation of the Newton matrix at the gradient point",
+                &what,
                 StepReport {
                     status: SolveStatus::NonFinite,
                     ..report

@@ -207,6 +207,32 @@ impl Model {
             ("tendon_limit", 4 * self.tendon_limits.len()),
         ]
     }
+    /// What node `n` of the Newton matrix's graph is, for messages: a body, a joint, a joint's
+    /// limits, a coupling, a tendon limit or a contact candidate (with the names).
+    pub fn node_name(&self, n: usize) -> String {
+        let t = &self.topology;
+        if n + 1 < self.nbody() {
+            return format!("body '{}'", self.bodies[n + 1].name);
+        }
+        if let Some(j) = t.joint_node.iter().position(|&x| x == Some(n)) {
+            return format!("joint '{}'", self.joints[j].name);
+        }
+        if let Some(j) = t.limit_node.iter().position(|&x| x == Some(n)) {
+            return format!("the limits of joint '{}'", self.joints[j].name);
+        }
+        if let Some(c) = t.contact_node.iter().position(|&x| x == n) {
+            let ct = &self.contacts[c];
+            let (a, b) = (&self.geoms[ct.geom_a].name, &self.geoms[ct.geom_b].name);
+            return format!("contact candidate {c} ('{a}' / '{b}')");
+        }
+        if let Some(k) = t.coupling_node.iter().position(|&x| x == n) {
+            return format!("joint coupling {k}");
+        }
+        if let Some(k) = t.tendon_node.iter().position(|&x| x == n) {
+            return format!("tendon limit {k}");
+        }
+        format!("node {n}")
+    }
     /// Identifier of the topology; a [`crate::State`] remembers it.
     pub fn topology_id(&self) -> u64 {
         self.topology.id

@@ -554,7 +554,7 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             &w[o..o + dim],
             nt,
             ws.saturated[c],
-            ws.proximal,
+            (ws.proximal, ws.slack_floor),
             &mut ws.matrix.values[diag..diag + dim * dim],
         );
         let (now, slip) = ws.contact_step[c].get(contact.radii());
@@ -630,16 +630,16 @@ fn contact_diag(
     x: &[f64],
     nt: Option<&NtScaling>,
     saturated: Option<Hold>,
-    rho: f64,
+    (rho, floor): (f64, f64),
     d: &mut [f64],
 ) {
     let dim = model.dim();
     d.fill(0.0);
     let mut set = |r: usize, c: usize, v: f64| d[r * dim + c] = v;
     set(0, 1, 1.0); // s - φ
-    // orthant complementarity rows b c - κ: ∂/∂b = c, ∂/∂c = b
+    // orthant complementarity rows b c - κ: ∂/∂b = c, ∂/∂c = b (c at least `floor · b`)
     for &(p, q, r) in orthant_pairs(model) {
-        set(r, p, x[q]);
+        set(r, p, x[q].max(floor * x[p]));
         set(r, q, x[p]);
     }
     match model {
@@ -739,10 +739,10 @@ fn assemble_limits(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             let b = 4 * i;
             let x = &w[o + b..o + b + 4];
             d[b * dim + b + 1] = 1.0; // s_lo
-            d[(b + 1) * dim + b] = x[1];
+            d[(b + 1) * dim + b] = x[1].max(ws.slack_floor * x[0]);
             d[(b + 1) * dim + b + 1] = x[0];
             d[(b + 2) * dim + b + 3] = 1.0; // s_hi
-            d[(b + 3) * dim + b + 2] = x[3];
+            d[(b + 3) * dim + b + 2] = x[3].max(ws.slack_floor * x[2]);
             d[(b + 3) * dim + b + 3] = x[2];
         }
         for (side, body) in [(0, joint.parent), (1, joint.child)] {

@@ -1103,6 +1103,27 @@ mod tests {
             .unwrap()
     }
 
+    /// Messages name the graph's nodes: bodies, joints, limits and contact candidates.
+    #[test]
+    fn nodes_are_named_for_messages() {
+        let model = contact_model();
+        let t = &model.topology;
+        assert_eq!(model.node_name(0), "body 'box'");
+        assert_eq!(model.node_name(1), "body 'puck'");
+        let slide = model.joint_id("slide").unwrap();
+        let joint = t.joint_node[slide].unwrap();
+        assert_eq!(model.node_name(joint), "joint 'slide'");
+        let limits = t.limit_node[slide].unwrap();
+        assert_eq!(model.node_name(limits), "the limits of joint 'slide'");
+        let c = t.contact_node[0];
+        let ct = &model.contacts[0];
+        let (a, b) = (&model.geoms[ct.geom_a].name, &model.geoms[ct.geom_b].name);
+        assert_eq!(
+            model.node_name(c),
+            format!("contact candidate 0 ('{a}' / '{b}')")
+        );
+    }
+
     #[test]
     fn newton_matrix_with_contacts_and_limits_matches_finite_differences() {
         let model = contact_model();
