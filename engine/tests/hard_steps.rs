@@ -24,7 +24,17 @@ fn replay_with(
     steps: usize,
     found: impl Fn(&Model) -> Model,
 ) -> Option<(Model, State, Vec<f64>)> {
-    let model = workload::shared("humanoid")?;
+    replay_robot("humanoid", seed, steps, found)
+}
+
+/// [`replay_with`] on the shared robot `name`.
+fn replay_robot(
+    name: &str,
+    seed: u64,
+    steps: usize,
+    found: impl Fn(&Model) -> Model,
+) -> Option<(Model, State, Vec<f64>)> {
+    let model = workload::shared(name)?;
     let found = found(&model);
     let mut state = workload::start_state(&model);
     let mut ws = Workspace::new(&model);
@@ -237,4 +247,48 @@ fn a_jammed_step_converges_from_the_pyramids_impulses() {
 #[test]
 fn a_step_that_jams_the_pyramid_too_converges_from_its_last_iterate() {
     jammed_step_converges_from_the_pyramids_impulses(253, 845);
+}
+
+/// The shared Panda's seed-371 step 159 under the default options (found in session 32): both
+/// fingers' pads on the floor (penetrations ~1e-12 m) and 0.55 mm from each other, ~300
+/// candidates active. The exact cones fail every attempt, from the pyramid's impulses too,
+/// while the pyramid converges (131 iterations taken whole): the step is the pyramid's, status
+/// `PyramidFriction`: a valid state (no contact sinks, every impulse inside its exact cone, the
+/// steps after it converge) without gradients (`step_jacobians` reports it unconverged).
+#[test]
+fn a_step_the_exact_cones_cannot_take_is_the_pyramids() {
+    let Some((model, start, u)) = replay_robot("panda", 371, 159, Model::clone) else {
+        return;
+    };
+    use ukemi_engine::SolveStatus;
+    let mut state = start.clone();
+    let mut ws = Workspace::new(&model);
+    let report = step(&model, &mut state, &mut ws, &u).unwrap();
+    assert_eq!(report.status, SolveStatus::PyramidFriction, "{report:?}");
+    assert!(report.status.is_success());
+    assert_no_penetration(&model, &state);
+    for (c, f) in state.contact_impulse(&model).chunks(3).enumerate() {
+        let mu = model.contacts[c].friction;
+        let tangential = (f[1] * f[1] + f[2] * f[2]).sqrt();
+        assert!(
+            f[0] >= 0.0 && tangential <= mu * f[0] * (1.0 + 1e-9),
+            "candidate {c}: {f:?}"
+        );
+    }
+    let lin = Linearization::new(
+        &model,
+        &start,
+        &u,
+        Coordinates::Maximal,
+        Wrt::STATE_CTRL,
+        None,
+    );
+    assert!(lin.is_err(), "no gradients through the pyramid's step");
+    let mut controls = workload::Controls::with_seed(371);
+    let ctrls: Vec<Vec<f64>> = (0..170).map(|_| controls.next(&model)).collect();
+    for (k, u) in ctrls.iter().enumerate().skip(160) {
+        let r = step(&model, &mut state, &mut ws, u).unwrap();
+        assert!(r.status.is_success(), "step {k}: {r:?}");
+        assert_no_penetration(&model, &state);
+    }
 }
