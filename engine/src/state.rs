@@ -533,8 +533,8 @@ pub struct Workspace {
     /// (`Options::friction_proximal`; 0 outside a hard interior-point solve).
     pub(crate) proximal: f64,
     /// The least slack of an orthant complementarity pair in the Newton matrix relative to its
-    /// impulse, `s ≥ slack_floor · γ` (matrix only; 0 but in the gradients' factorisation at
-    /// κ = 0, see `gradients::SLACK_FLOOR`).
+    /// impulse, `s ≥ slack_floor · γ` (matrix only; 0 but while the gradients assemble their
+    /// matrix at the gradient point, see `gradients::SLACK_FLOOR`).
     pub(crate) slack_floor: f64,
     /// The left-out candidates' pairs modelled in the mean complementarity (none but in the
     /// third activation tier, see `FarPairs`).
