@@ -89,10 +89,15 @@ pub(crate) fn retry(
     let none = AppliedForces::default();
     let pyramid = pyramid_step(model, state, ctrl, &none)?;
     if let Some(warm) = pyramid.and_then(|(p, _)| warm_started_from(state, &p)) {
+        // (the whole step only, as `crate::step` takes it)
         newton::prepare(model, &warm, ws, ctrl, &none);
         let report = newton::solve(model, &warm, ws);
-        if let Ok(kept) = attempts(model, &warm, ws, ctrl, report) {
-            return Ok(kept);
+        if report.status.is_success() {
+            let mut next = state.clone();
+            newton::write_state(model, &mut next, ws);
+            if !suspect(model, state, &next, ws) {
+                return Ok(StoredStep::Whole(StoredSolution::of(ws, report)));
+            }
         }
     }
     // then the exact problem, without the friction that `drop_redundant_friction` holds (its

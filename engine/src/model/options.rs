@@ -94,9 +94,9 @@ pub struct Options {
     pub drop_redundant_friction: bool,
     /// A step whose every attempt with the exact (second-order) friction cones fails is taken
     /// with each cone replaced by the four-sided pyramid inscribed in it (the `linear` contact
-    /// model, Dojo's LCP form), and the exact cones are solved again warm-started from the
-    /// pyramid's impulses (a failed pyramid's last iterate's too); the step is exact when that
-    /// converges. When it does not (and the
+    /// model, Dojo's LCP form), and the whole step is solved again with the exact cones
+    /// warm-started from the pyramid's impulses (a failed pyramid's last iterate's too); the
+    /// step is exact when that converges. When it does not (and the
     /// start rebuilt from its minimal coordinates fails too), the pyramid's step is returned as
     /// [`crate::SolveStatus::PyramidFriction`]: no penetration, every contact force inside its
     /// Coulomb cone, but a sliding contact's friction along the pyramid's nearest edge instead
