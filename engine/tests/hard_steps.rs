@@ -60,6 +60,26 @@ fn as_found(model: &Model) -> Model {
         .unwrap()
 }
 
+/// The step's exact (`kappa_grad = None`) linearisation in maximal coordinates: its forward
+/// pass takes the same decisions as `step` from the same start.
+fn exact_linearization(
+    model: &Model,
+    start: &State,
+    u: &[f64],
+) -> ukemi_engine::Result<Linearization> {
+    Linearization::new(model, start, u, Coordinates::Maximal, Wrt::STATE_CTRL, None)
+}
+
+/// `model` without the pyramid friction cones' last resort (`Options::pyramid_fallback`).
+fn pyramid_off(model: &Model) -> Model {
+    model
+        .with_options(ukemi_engine::Options {
+            pyramid_fallback: false,
+            ..model.options.clone()
+        })
+        .unwrap()
+}
+
 /// `state` rebuilt from its minimal coordinates (what `rollout_vjp` and the JAX layer step
 /// from).
 fn rebuilt(model: &Model, state: &State) -> State {
@@ -115,22 +135,9 @@ fn a_folded_leg_step_converges() {
     let Some((model, start, u)) = replay(13, 127) else {
         return;
     };
-    let off = model
-        .with_options(ukemi_engine::Options {
-            pyramid_fallback: false,
-            ..model.options.clone()
-        })
-        .unwrap();
+    let off = pyramid_off(&model);
     for model in [model, off] {
-        let mut lin = Linearization::new(
-            &model,
-            &start,
-            &u,
-            Coordinates::Maximal,
-            Wrt::STATE_CTRL,
-            None,
-        )
-        .unwrap();
+        let mut lin = exact_linearization(&model, &start, &u).unwrap();
         let jac = lin.jacobians(&model).unwrap();
         assert!(jac.a.iter().chain(jac.b.iter()).all(|x| x.is_finite()));
         let mut state = start.clone();
@@ -196,12 +203,7 @@ fn jammed_step_converges_from_the_pyramids_impulses(seed: u64, at: usize) {
     use ukemi_engine::SolveStatus;
     // the jam: without the pyramid the step fails (should this start converging, the solver has
     // outgrown this state: find another with `step_bench humanoid.xml 1000 1 SEED`)
-    let off = model
-        .with_options(ukemi_engine::Options {
-            pyramid_fallback: false,
-            ..model.options.clone()
-        })
-        .unwrap();
+    let off = pyramid_off(&model);
     let mut failed = start.clone();
     let report = step(&off, &mut failed, &mut Workspace::new(&off), &u).unwrap();
     assert!(!report.status.is_success(), "{report:?}");
@@ -211,15 +213,7 @@ fn jammed_step_converges_from_the_pyramids_impulses(seed: u64, at: usize) {
     assert_eq!(report.status, SolveStatus::Converged, "{report:?}");
     assert_no_penetration(&model, &state);
     // the gradients' forward pass decides the same way
-    let lin = Linearization::new(
-        &model,
-        &start,
-        &u,
-        Coordinates::Maximal,
-        Wrt::STATE_CTRL,
-        None,
-    )
-    .unwrap();
+    let lin = exact_linearization(&model, &start, &u).unwrap();
     let (p, q) = (lin.next_state().pose(1).pos, state.pose(1).pos);
     assert!((p - q).norm() < 1e-9, "{p:?} vs {q:?}");
     // and the exact cones take the steps after it
@@ -275,14 +269,7 @@ fn a_step_the_exact_cones_cannot_take_is_the_pyramids() {
             "candidate {c}: {f:?}"
         );
     }
-    let lin = Linearization::new(
-        &model,
-        &start,
-        &u,
-        Coordinates::Maximal,
-        Wrt::STATE_CTRL,
-        None,
-    );
+    let lin = exact_linearization(&model, &start, &u);
     assert!(lin.is_err(), "no gradients through the pyramid's step");
     let mut controls = workload::Controls::with_seed(371);
     let ctrls: Vec<Vec<f64>> = (0..170).map(|_| controls.next(&model)).collect();
