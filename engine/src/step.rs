@@ -127,11 +127,10 @@ pub fn step_with(
         .as_ref()
         .and_then(|(p, _)| warm_started_from(&start, p));
     if let Some(warm) = warm {
-        let r = whole_step(model, &warm, ws, ctrl, forces);
+        let (r, kept) = whole_step(model, &warm, ws, ctrl, forces);
         pyramid_iterations += r.iterations;
-        if r.status.is_success() {
-            state.copy_from(&start);
-            newton::write_state(model, state, ws);
+        if let Some(next) = kept {
+            *state = next;
             return Ok(StepReport {
                 iterations: report.iterations + pyramid_iterations,
                 ..r
@@ -204,30 +203,27 @@ pub fn pyramid_step(
 }
 
 /// The whole step from `state` (its warm start as it is), kept only if it converges and is not
-/// [`suspect`]: the report (a converged but suspect step's status made `MaxIterations`), the
-/// solution in `ws` with `ws.start` left alone. The exact cones from the pyramid's impulses
-/// are tried so: the warm start is the whole step's (sub-steps of `h / n` would start from a
-/// whole step's impulses), and on the Panda's seed-371 step 159, where that fails, the
-/// subdivisions and long solves after it cost 1563 iterations at ~300 active candidates.
-fn whole_step(
+/// [`suspect`]: its report, and its next state when kept (the solution in `ws` either way).
+/// The exact cones from the pyramid's impulses are tried so (here and in the gradients'
+/// ladder): the warm start is the whole step's (sub-steps of `h / n` would start from a whole
+/// step's impulses), and on the Panda's seed-371 step 159, where that fails, the subdivisions
+/// and long solves after it cost 1563 iterations at ~300 active candidates.
+pub(crate) fn whole_step(
     model: &Model,
     state: &State,
     ws: &mut Workspace,
     ctrl: &[f64],
     forces: &AppliedForces,
-) -> StepReport {
-    let start = ws.start.clone();
+) -> (StepReport, Option<State>) {
     newton::prepare(model, state, ws, ctrl, forces);
-    let mut report = newton::solve(model, state, ws);
-    ws.start = start;
-    if report.status.is_success() {
-        let mut next = state.clone();
-        newton::write_state(model, &mut next, ws);
-        if suspect(model, state, &next, ws) {
-            report.status = SolveStatus::MaxIterations;
-        }
+    let report = newton::solve(model, state, ws);
+    if !report.status.is_success() {
+        return (report, None);
     }
-    report
+    let mut next = state.clone();
+    newton::write_state(model, &mut next, ws);
+    let kept = !suspect(model, state, &next, ws);
+    (report, kept.then_some(next))
 }
 
 /// `start` with the impulses (joint, contact and limit variables) of `solution` as its warm

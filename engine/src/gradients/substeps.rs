@@ -36,7 +36,7 @@ use crate::solver::newton;
 use crate::state::{State, StepReport, Workspace};
 use crate::step::{
     AppliedForces, energy_ceiling, long_solve, pyramid_step, rotation_substeps, subdivided_with,
-    substep_model, suspect, warm_started_from,
+    substep_model, suspect, warm_started_from, whole_step,
 };
 use crate::{Result, ensure};
 
@@ -90,14 +90,8 @@ pub(crate) fn retry(
     let pyramid = pyramid_step(model, state, ctrl, &none)?;
     if let Some(warm) = pyramid.and_then(|(p, _)| warm_started_from(state, &p)) {
         // (the whole step only, as `crate::step` takes it)
-        newton::prepare(model, &warm, ws, ctrl, &none);
-        let report = newton::solve(model, &warm, ws);
-        if report.status.is_success() {
-            let mut next = state.clone();
-            newton::write_state(model, &mut next, ws);
-            if !suspect(model, state, &next, ws) {
-                return Ok(StoredStep::Whole(StoredSolution::of(ws, report)));
-            }
+        if let (report, Some(_)) = whole_step(model, &warm, ws, ctrl, &none) {
+            return Ok(StoredStep::Whole(StoredSolution::of(ws, report)));
         }
     }
     // then the exact problem, without the friction that `drop_redundant_friction` holds (its
