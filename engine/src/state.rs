@@ -548,6 +548,10 @@ pub struct Workspace {
     pub(crate) gentle_widening: bool,
     /// Whether the last interior-point attempt widened its warm start.
     pub(crate) widened: bool,
+    /// Set while a sub-step of a subdivided step is solved (`step::attempt`): its warm start,
+    /// the previous sub-step's solution, turns less than a whole step's, so a sliding cone
+    /// need not cut its first predictor (`inequality::turning_on_boundaries`).
+    pub(crate) substep: bool,
 }
 
 impl Workspace {
@@ -699,6 +703,7 @@ impl Workspace {
         self.attempt = 0;
         self.gentle_widening = false;
         self.widened = false;
+        self.substep = false;
         self.kept.valid = false;
         if !iterate {
             return;
@@ -866,6 +871,7 @@ impl Workspace {
             every_candidate: false,
             gentle_widening: false,
             widened: false,
+            substep: false,
         }
     }
 }

@@ -633,7 +633,9 @@ fn attempt(
     let (mut gained, mut finer) = (false, 1);
     for i in 0..n as usize {
         newton::prepare(&sub, &s, ws, ctrl, forces);
+        ws.substep = n > 1;
         let r = newton::solve(&sub, &s, ws);
+        ws.substep = false;
         *iterations += r.iterations;
         let mut next = s.clone();
         newton::write_state(&sub, &mut next, ws);

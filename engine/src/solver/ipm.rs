@@ -229,6 +229,19 @@ pub(crate) fn solve_to(
             break;
         }
         report.iterations = it + 1;
+        // a warm start that the first predictor cannot leave far: pushed further inside (a
+        // whole step's turning slide cuts that predictor: widened without computing it)
+        let widen_now = it == 0
+            && ws.first_attempt()
+            && central.is_none()
+            && o.warm_start
+            && !ws.substep
+            && super::inequality::turning_on_boundaries(model, ws);
+        if widen_now {
+            widen_warm_start(model, ws);
+            vio = evaluate_kept(model, state, ws, false, 0.0);
+            continue;
+        }
         let mu0 = mean_complementarity(model, &ws.active, &ws.w, &ws.delta_aff, 0.0)
             + ws.far.mean(model, 0.0);
         ws.nt_on = o.nt_scaling && !ws.nt_disabled && mu0 > NT_MU_FLOOR;
@@ -264,20 +277,13 @@ pub(crate) fn solve_to(
         ws.matrix.solve(p, &mut ws.delta_aff);
         let act = &ws.active;
         let alpha_aff = cone_search(model, act, &ws.saturated, &ws.w, &ws.delta_aff, 1.0, 1.0);
-        // a warm start that the first predictor cannot leave far: pushed further inside
         if it == 0
             && ws.first_attempt()
             && central.is_none()
             && o.warm_start
             && alpha_aff < WIDEN_BELOW
         {
-            let impulse = if ws.gentle_widening {
-                WIDEN_IMPULSE_GENTLE.min(widening(model))
-            } else {
-                widening(model)
-            };
-            super::inequality::widen(model, ws, impulse, WIDEN_SLACK);
-            ws.widened = true;
+            widen_warm_start(model, ws);
             vio = evaluate_kept(model, state, ws, false, 0.0);
             continue;
         }
@@ -383,6 +389,18 @@ pub(crate) fn solve_to(
         report.complementarity = k;
     }
     report
+}
+
+/// Push the warm start inside its cones (see [`WIDEN_BELOW`]; gently on the retry of a
+/// widened first attempt that failed).
+fn widen_warm_start(model: &Model, ws: &mut Workspace) {
+    let impulse = if ws.gentle_widening {
+        WIDEN_IMPULSE_GENTLE.min(widening(model))
+    } else {
+        widening(model)
+    };
+    super::inequality::widen(model, ws, impulse, WIDEN_SLACK);
+    ws.widened = true;
 }
 
 /// `Δ ← -R⁻¹ Δ` with the current factorisation.
@@ -563,5 +581,48 @@ mod tests {
             early.residual >= ENDGAME_RESIDUAL && early.iterations == 1,
             "{early:?}"
         );
+    }
+
+    /// A box sliding and spinning on the floor (its corners' slip turns every step): the
+    /// second step's warm start has its corners' cones sliding on their boundaries while the
+    /// step turns their slip (`inequality::turning_on_boundaries`), and widening it without the
+    /// first predictor lands on the same iterate, bit for bit and in as many iterations, as the
+    /// predictor's test does (a sub-step takes that test). A box at rest, or sliding straight
+    /// (its slip only slows, and the predictor is not cut), has no such cone.
+    #[test]
+    fn a_turning_slide_is_widened_as_its_cut_predictor_would_widen_it() {
+        let model = crate::gradients::test_scenes::box_on_floor(0.01, 0.5);
+        // the second step's workspace, prepared and evaluated at its warm start
+        let second = |v: [f64; 3], w: [f64; 3]| {
+            let mut state = State::reference(&model);
+            let v = nalgebra::Vector3::from(v);
+            state.set_velocity(1, &v, &nalgebra::Vector3::from(w));
+            crate::step(&model, &mut state, &mut Workspace::new(&model), &[]).unwrap();
+            let mut ws = Workspace::new(&model);
+            crate::solver::newton::prepare(&model, &state, &mut ws, &[], &Default::default());
+            crate::solver::newton::evaluate(&model, &state, &mut ws, false, 0.0);
+            let turning = super::super::inequality::turning_on_boundaries(&model, &ws);
+            (state, ws, turning)
+        };
+        assert!(!second([0.0; 3], [0.0; 3]).2);
+        let (state, mut straight, turning) = second([1.0, 0.0, 0.0], [0.0; 3]);
+        assert!(!turning);
+        assert!(solve(&model, &state, &mut straight).status.is_success());
+        assert!(!straight.widened);
+        let (state, mut fast, turning) = second([1.0, 0.0, 0.0], [0.0, 0.0, 3.0]);
+        assert!(turning);
+        let (_, mut tested, _) = second([1.0, 0.0, 0.0], [0.0, 0.0, 3.0]);
+        tested.substep = true;
+        let (a, b) = (
+            solve(&model, &state, &mut fast),
+            solve(&model, &state, &mut tested),
+        );
+        assert!(
+            a.status.is_success() && fast.widened && tested.widened,
+            "{a:?}"
+        );
+        assert_eq!(a.iterations, b.iterations);
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&fast.w), bits(&tested.w));
     }
 }
