@@ -269,7 +269,7 @@ const TURN_REACH: f64 = 5.0;
 /// residual's component across `u`, is below [`TURN_REACH`]; a straight slide, whose slip only
 /// slows, is not cut and not counted. Measured (the first affine step of each whole step,
 /// `step_bench MODEL 1000 1 SEED`): of the steps counted none had its predictor reach
-/// `WIDEN_BELOW` (shared humanoid, A1, Panda at seeds 2, 3, 5: 4909 counted of 6590 cut;
+/// `WIDEN_BELOW` (shared humanoid, A1, Panda at seeds 2, 3, 5: 3909 counted of 5899 cut;
 /// gymnasium ant and humanoid, seed 2: 1355 of 1902; the planar half_cheetah, hopper and
 /// walker2d: none counted).
 pub(crate) fn turning_on_boundaries(model: &Model, ws: &Workspace) -> bool {
