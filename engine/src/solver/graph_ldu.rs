@@ -428,6 +428,10 @@ struct Live {
     /// The value ranges of those that are not fill blocks, adjacent ones merged: one `fill` a
     /// range instead of one a block (a `memset` call each, 2% of a humanoid step).
     zero_ranges: Vec<Range<usize>>,
+    /// Those blocks themselves, `(row node, block index)` in row order: the ones a
+    /// factorisation scans for nonzeros (the rows' blocks in skipped columns, most of a body
+    /// row's among hundreds of inactive candidates, are zero: `nz` is cleared once here).
+    scan: Vec<(usize, usize)>,
     stale: bool,
     /// Nonzero assembled blocks of their rows, `(row node, block index)`, row by row.
     blocks: Vec<(usize, usize)>,
@@ -458,6 +462,7 @@ impl BlockMatrix {
                 steps: (0..p.steps.len()).collect(),
                 // (built by the first `refresh_live`)
                 zero_blocks: Vec::new(),
+                scan: Vec::new(),
                 zero_ranges: Vec::new(),
                 stale: true,
                 blocks: Vec::with_capacity(p.nblocks()),
@@ -514,13 +519,19 @@ impl BlockMatrix {
         live.steps.extend(steps);
         live.zero_blocks.clear();
         live.zero_ranges.clear();
+        live.scan.clear();
         for &i in &live.nodes {
-            let row = p.row_ptr[i]..p.row_ptr[i + 1];
-            for idx in row.filter(|&idx| !self.skip[p.cols[idx]]) {
+            for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
+                if self.skip[p.cols[idx]] {
+                    // (a skipped node is never the row's own: its block stays zero)
+                    self.nz[idx] = false;
+                    continue;
+                }
                 if p.fill[idx] {
                     live.zero_blocks.push((i, idx));
                     continue;
                 }
+                live.scan.push((i, idx));
                 let r = p.vals[idx]..p.vals[idx] + p.dims[i] * p.dims[p.cols[idx]];
                 match live.zero_ranges.last_mut() {
                     Some(last) if last.end == r.start => last.end = r.end,
@@ -727,21 +738,20 @@ impl BlockMatrix {
                 Some(last) if last.end == rows.start => last.end = rows.end,
                 _ => live.rows.push(rows),
             }
-            for idx in p.row_ptr[i]..p.row_ptr[i + 1] {
-                let j = p.cols[idx];
-                if self.skip[j] || p.fill[idx] {
-                    // fill blocks are zero as assembled (see `Self::values`)
-                    self.nz[idx] = i == j;
-                    continue;
-                }
-                let range = p.vals[idx]..p.vals[idx] + p.dims[i] * p.dims[j];
-                let block = &self.values[range.clone()];
-                // NaN != 0: a non-finite block is kept and reported by the factorisation
-                self.nz[idx] = block.iter().any(|&v| v != 0.0);
-                if self.nz[idx] && refinable {
-                    self.assembled[range.clone()].copy_from_slice(&self.values[range]);
-                    live.blocks.push((i, idx));
-                }
+        }
+        // fill blocks are zero as assembled (see `Self::values`); those of skipped columns
+        // were cleared by `refresh_live`
+        for &(_, idx) in &live.zero_blocks {
+            self.nz[idx] = false;
+        }
+        for &(i, idx) in &live.scan {
+            let range = p.vals[idx]..p.vals[idx] + p.dims[i] * p.dims[p.cols[idx]];
+            let block = &self.values[range.clone()];
+            // NaN != 0: a non-finite block is kept and reported by the factorisation
+            self.nz[idx] = block.iter().any(|&v| v != 0.0);
+            if self.nz[idx] && refinable {
+                self.assembled[range.clone()].copy_from_slice(&self.values[range]);
+                live.blocks.push((i, idx));
             }
         }
         for s in self.live.steps.iter().map(|&k| &p.steps[k]) {

@@ -495,11 +495,10 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
                     continue;
                 }
                 let ob = body_slot(model, b);
-                for r in 0..ncon {
-                    let lam = w[o + r];
-                    for i in 0..6 {
-                        residual[ob + i] -= k[12 * r + 6 * side + i] * lam;
-                    }
+                let rb = &mut residual[ob..ob + 6];
+                for (krow, &lam) in k.chunks_exact(12).zip(&w[o..o + ncon]) {
+                    let krow = &krow[6 * side..6 * side + 6];
+                    rb.iter_mut().zip(krow).for_each(|(r, &kk)| *r -= kk * lam);
                 }
             }
             let np = if joint.parent == 0 {
@@ -697,13 +696,15 @@ fn add_free_coupling_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint:
                     None => continue,
                 }
             };
+            let block = &mut ws.matrix.values[off..off + 36];
             for r in 0..joint.nfree() {
                 let row = &ws.free_jac[fa + 12 * r..fa + 12 * r + 12];
                 let d = h * joint.damping[r] + joint.armature.get(r).copied().unwrap_or(0.0);
-                for i in 0..6 {
-                    for k in 0..6 {
-                        ws.matrix.values[off + 6 * i + k] += d * row[6 * sa + i] * row[6 * sb + k];
-                    }
+                let (ra, rb) = (&row[6 * sa..6 * sa + 6], &row[6 * sb..6 * sb + 6]);
+                for (out, &a) in block.chunks_exact_mut(6).zip(ra) {
+                    // (d a) b: the product in the order written before
+                    let da = d * a;
+                    out.iter_mut().zip(rb).for_each(|(o, &b)| *o += da * b);
                 }
             }
         }
