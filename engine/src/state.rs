@@ -81,6 +81,21 @@ impl State {
         self.topology_id = other.topology_id;
     }
 
+    /// [`Self::copy_from`] that takes `other`'s inequality variables by swapping them with
+    /// `self`'s, for a caller that rewrites every one of `other`'s next
+    /// ([`crate::solver::newton::write_state`] of a model with complementarity pairs).
+    pub(crate) fn copy_taking_ineq_vars(&mut self, other: &mut State) {
+        self.copy_motion_from(other);
+        self.joint_impulse.copy_from_slice(&other.joint_impulse);
+        assert_eq!(
+            self.ineq_vars.len(),
+            other.ineq_vars.len(),
+            "states of one model"
+        );
+        std::mem::swap(&mut self.ineq_vars, &mut other.ineq_vars);
+        self.topology_id = other.topology_id;
+    }
+
     /// The reference configuration at rest.
     pub fn reference(model: &Model) -> State {
         let n = model.nbody();

@@ -188,8 +188,10 @@ pub(crate) fn release_closing(
     closing.fill(false);
     let mut released = 0;
     for (c, close) in closing.iter_mut().enumerate().take(model.ncontact()) {
-        let o = t.pattern.offset(t.contact_node[c]);
-        if ws.saturated[c] == Some(Hold::Separated) && ws.w[o + 1] < SEPARATED_GAP {
+        if ws.saturated[c] != Some(Hold::Separated) {
+            continue;
+        }
+        if ws.w[t.pattern.offset(t.contact_node[c]) + 1] < SEPARATED_GAP {
             ws.saturated[c] = None;
             *close = true;
             released += 1;
