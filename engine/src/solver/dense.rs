@@ -291,32 +291,54 @@ fn lu_solve_left_matrix_sized(lu: &[f64], n: usize, piv: &[usize], x: &mut [f64]
     for (c, &r) in piv[..n].iter().enumerate() {
         swap_rows(x, ncols, c, r);
     }
+    // (each row is updated in a local copy when it fits one: the same operations in the same
+    // order, without storing the row after each update)
+    let mut acc = [0.0f64; 8];
+    let local = ncols <= acc.len();
     // L Y = P X: row_i -= l_ik row_k for k < i
     for i in 1..n {
         let (top, bottom) = x.split_at_mut(i * ncols);
         let row_i = &mut bottom[..ncols];
+        let target: &mut [f64] = if local {
+            acc[..ncols].copy_from_slice(row_i);
+            &mut acc[..ncols]
+        } else {
+            row_i
+        };
         for (k, row_k) in top.chunks_exact(ncols).enumerate() {
             let l = lu[i * n + k];
             if l != 0.0 {
-                axpy_neg(row_i, l, row_k);
+                axpy_neg(target, l, row_k);
             }
+        }
+        if local {
+            bottom[..ncols].copy_from_slice(&acc[..ncols]);
         }
     }
     // U Z = Y: row_i = (row_i - Σ_{k>i} u_ik row_k) / u_ii
     for i in (0..n).rev() {
         let (top, bottom) = x.split_at_mut((i + 1) * ncols);
         let row_i = &mut top[i * ncols..];
+        let target: &mut [f64] = if local {
+            acc[..ncols].copy_from_slice(row_i);
+            &mut acc[..ncols]
+        } else {
+            row_i
+        };
         for (j, row_k) in bottom[..(n - i - 1) * ncols]
             .chunks_exact(ncols)
             .enumerate()
         {
             let u = lu[i * n + i + 1 + j];
             if u != 0.0 {
-                axpy_neg(row_i, u, row_k);
+                axpy_neg(target, u, row_k);
             }
         }
         let inv = 1.0 / lu[i * n + i];
-        row_i.iter_mut().for_each(|v| *v *= inv);
+        target.iter_mut().for_each(|v| *v *= inv);
+        if local {
+            top[i * ncols..(i + 1) * ncols].copy_from_slice(&acc[..ncols]);
+        }
     }
 }
 
@@ -336,14 +358,27 @@ fn gemm_sub_sized(c: &mut [f64], a: &[f64], b: &[f64], m: usize, k: usize, n: us
         return;
     }
     for (c_row, a_row) in c[..m * n].chunks_exact_mut(n).zip(a.chunks_exact(k)) {
-        // c_i,: -= Σ_p a_ip b_p,:
+        // c_i,: -= Σ_p a_ip b_p,:  (accumulated in a local row: the same operations in the
+        // same order, without storing `c_i,:` after each `p`)
+        let mut acc = [0.0f64; 8];
+        if n > 8 {
+            for (&a_ip, b_row) in a_row.iter().zip(b.chunks_exact(n)) {
+                if a_ip != 0.0 {
+                    axpy_neg(c_row, a_ip, b_row);
+                }
+            }
+            continue;
+        }
+        let acc = &mut acc[..n];
+        acc.copy_from_slice(c_row);
         for (&a_ip, b_row) in a_row.iter().zip(b.chunks_exact(n)) {
             // a contact's coupling to a body has 3 nonzero columns of 8: skip the zero ones
             // (their products are zeros; only a zero's sign or a NaN in `b` could differ)
             if a_ip != 0.0 {
-                axpy_neg(c_row, a_ip, b_row);
+                axpy_neg(acc, a_ip, b_row);
             }
         }
+        c_row.copy_from_slice(acc);
     }
 }
 
