@@ -357,28 +357,28 @@ fn gemm_sub_sized(c: &mut [f64], a: &[f64], b: &[f64], m: usize, k: usize, n: us
     if n == 0 || k == 0 {
         return;
     }
-    for (c_row, a_row) in c[..m * n].chunks_exact_mut(n).zip(a.chunks_exact(k)) {
-        // c_i,: -= Σ_p a_ip b_p,:  (accumulated in a local row: the same operations in the
-        // same order, without storing `c_i,:` after each `p`)
-        let mut acc = [0.0f64; 8];
-        if n > 8 {
-            for (&a_ip, b_row) in a_row.iter().zip(b.chunks_exact(n)) {
-                if a_ip != 0.0 {
-                    axpy_neg(c_row, a_ip, b_row);
-                }
-            }
-            continue;
-        }
-        let acc = &mut acc[..n];
-        acc.copy_from_slice(c_row);
+    // c_i,: -= Σ_p a_ip b_p,:
+    let update = |row: &mut [f64], a_row: &[f64]| {
         for (&a_ip, b_row) in a_row.iter().zip(b.chunks_exact(n)) {
             // a contact's coupling to a body has 3 nonzero columns of 8: skip the zero ones
             // (their products are zeros; only a zero's sign or a NaN in `b` could differ)
             if a_ip != 0.0 {
-                axpy_neg(acc, a_ip, b_row);
+                axpy_neg(row, a_ip, b_row);
             }
         }
-        c_row.copy_from_slice(acc);
+    };
+    let rows = c[..m * n].chunks_exact_mut(n).zip(a.chunks_exact(k));
+    if n > 8 {
+        rows.for_each(|(c_row, a_row)| update(c_row, a_row));
+        return;
+    }
+    // (each row accumulated in a local copy: the same operations in the same order, without
+    // storing `c_i,:` after each `p`)
+    let mut acc = [0.0f64; 8];
+    for (c_row, a_row) in rows {
+        acc[..n].copy_from_slice(c_row);
+        update(&mut acc[..n], a_row);
+        c_row.copy_from_slice(&acc[..n]);
     }
 }
 
