@@ -269,9 +269,11 @@ const TURN_REACH: f64 = 5.0;
 /// residual's component across `u`, is below [`TURN_REACH`]; a straight slide, whose slip only
 /// slows, is not cut and not counted. Measured (the first affine step of each whole step,
 /// `step_bench MODEL 1000 1 SEED`): of the steps counted none had its predictor reach
-/// `WIDEN_BELOW` (shared humanoid, A1, Panda at seeds 2, 3, 5: 3909 counted of 5899 cut;
-/// gymnasium ant and humanoid, seed 2: 1355 of 1902; the planar half_cheetah, hopper and
-/// walker2d: none counted).
+/// `WIDEN_BELOW` on the shared humanoid, A1 and Panda at seeds 2, 3, 5 (3909 counted of 5899
+/// cut) or the gymnasium humanoid at seed 2 (788 of 974); on the gymnasium ant, seeds 1-8,
+/// 3 of 4534 counted had a predictor just past it (0.504, 0.528, 0.533), and are widened
+/// where the test would not have widened them (seed 3's step 455: 9 iterations instead of
+/// 15). The planar half_cheetah, hopper and walker2d: none counted.
 pub(crate) fn turning_on_boundaries(model: &Model, ws: &Workspace) -> bool {
     let (w, r) = (&ws.w, &ws.residual);
     let t = &model.topology;
