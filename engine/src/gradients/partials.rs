@@ -363,9 +363,9 @@ pub(super) fn partials(
     // base of the output tangent: the next state at the gradient point
     let mut base_next = point.state.clone();
     next_state_into(model, &point.state, w, &mut base_next);
-    let mut out_base = Point::new(model, &base_next, Coordinates::Maximal)?;
+    // (maximal coordinates leave the state as it is: the next state itself)
+    let mut out_base = Point::from_state(model, base_next, Coordinates::Maximal)?;
     out_base.coords = point.coords;
-    out_base.state = base_next;
     let refresh = plan.refresh.as_deref();
     residual_columns(&mut probe, &mut out, inputs, &eps, w, &plan.groups, refresh);
     light_columns(&mut probe, &mut out, inputs, &eps, &plan.light_groups);

@@ -131,11 +131,19 @@ impl Point {
     /// from `(qpos, qvel)` (velocities consistent with the joints at this configuration), so
     /// the linearised map is exactly `x ↦ minimal(step(maximal(x)))`.
     pub fn new(model: &Model, state: &State, coords: Coordinates) -> crate::Result<Point> {
+        Point::from_state(model, state.clone(), coords)
+    }
+
+    /// [`Point::new`] taking the state (no copy of its inequality variables).
+    pub(crate) fn from_state(
+        model: &Model,
+        mut state: State,
+        coords: Coordinates,
+    ) -> crate::Result<Point> {
         let mut qpos = vec![0.0; model.nq];
         let mut qvel = vec![0.0; model.nv];
-        qpos_into(model, state, &mut qpos);
-        qvel_into(model, state, &mut qvel);
-        let mut state = state.clone();
+        qpos_into(model, &state, &mut qpos);
+        qvel_into(model, &state, &mut qvel);
         if coords == Coordinates::Minimal {
             set_minimal(model, &mut state, &qpos, &qvel)?;
         }
