@@ -910,3 +910,33 @@ impl Workspace {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pooled workspace keeps buffers that every step writes before reading them
+    /// (`Workspace::poison_written_before_read`): whatever step it solved last, its next step
+    /// is bit for bit the one a new workspace takes. A box sliding and spinning on the floor
+    /// (sliding cones, a widened warm start) and one at rest take turns on one pooled
+    /// workspace.
+    #[test]
+    fn a_pooled_workspace_steps_as_a_new_one_whatever_it_solved_last() {
+        let model = crate::gradients::test_scenes::box_on_floor(0.01, 0.5);
+        let stepped = |state: &State, ws: &mut Workspace| {
+            let mut next = state.clone();
+            crate::step(&model, &mut next, ws, &[]).unwrap();
+            next
+        };
+        let mut spinning = State::reference(&model);
+        let (v, w) = (Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 0.0, 3.0));
+        spinning.set_velocity(1, &v, &w);
+        let spinning = stepped(&spinning, &mut Workspace::new(&model));
+        let rest = stepped(&State::reference(&model), &mut Workspace::new(&model));
+        for state in [&spinning, &rest, &spinning, &rest] {
+            let fresh = stepped(state, &mut Workspace::new(&model));
+            let pooled = stepped(state, &mut Recycled::new(Workspace::pooled(&model)));
+            assert_eq!(pooled, fresh);
+        }
+    }
+}
