@@ -75,9 +75,14 @@ impl State {
 
     /// Copy `other` (a state of the same model) into `self` without allocating.
     pub(crate) fn copy_from(&mut self, other: &State) {
+        self.copy_all_but_ineq_vars(other);
+        self.ineq_vars.copy_from_slice(&other.ineq_vars);
+    }
+
+    /// [`Self::copy_from`] but for the inequality variables.
+    fn copy_all_but_ineq_vars(&mut self, other: &State) {
         self.copy_motion_from(other);
         self.joint_impulse.copy_from_slice(&other.joint_impulse);
-        self.ineq_vars.copy_from_slice(&other.ineq_vars);
         self.topology_id = other.topology_id;
     }
 
@@ -85,15 +90,13 @@ impl State {
     /// `self`'s, for a caller that rewrites every one of `other`'s next
     /// ([`crate::solver::newton::write_state`] of a model with complementarity pairs).
     pub(crate) fn copy_taking_ineq_vars(&mut self, other: &mut State) {
-        self.copy_motion_from(other);
-        self.joint_impulse.copy_from_slice(&other.joint_impulse);
+        self.copy_all_but_ineq_vars(other);
         assert_eq!(
             self.ineq_vars.len(),
             other.ineq_vars.len(),
             "states of one model"
         );
         std::mem::swap(&mut self.ineq_vars, &mut other.ineq_vars);
-        self.topology_id = other.topology_id;
     }
 
     /// The reference configuration at rest.
@@ -754,6 +757,7 @@ impl Workspace {
             }
         }
     }
+
     /// Contact candidates that took part in the last step solved with this workspace (all of
     /// them before the first step); the others were farther than the step's reach and carried
     /// no impulse (see [`crate::Options::activation_margin`]).
