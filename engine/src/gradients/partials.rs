@@ -569,6 +569,7 @@ fn output_partials(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gradients::plan::translates_rigidly;
     use crate::{BodySpec, JointKind, JointSpec, ModelBuilder, Workspace};
 
     /// Bodies whose pose (`moved`) or pose or velocity (`touched`) differ between two states.
@@ -588,7 +589,7 @@ mod tests {
     }
 
     /// A free base with two branches holding every other joint kind (a welded body among them),
-    /// moving after a few steps under gravity.
+    /// each with a spring and a damper, moving after a few steps under gravity.
     fn every_kind() -> (Model, State) {
         use JointKind::*;
         let kinds = [
@@ -634,7 +635,9 @@ mod tests {
                 .joint(
                     JointSpec::new(&format!("j{i}"), *kind, &parent, &name)
                         .axis([0.2, 1.0, 0.3])
-                        .anchors(anchor, [0.0; 3]),
+                        .anchors(anchor, [0.0; 3])
+                        .stiffness(2.0)
+                        .damping(0.3),
                 );
         }
         let m = b.compile().unwrap();
@@ -644,6 +647,53 @@ mod tests {
             crate::step(&m, &mut s, &mut ws, &[]).unwrap();
         }
         (m, s)
+    }
+
+    /// Translating a free base moves its whole tree rigidly: with springs and dampers on every
+    /// joint kind below it, each deflected and moving, and no contact, no row of the residual
+    /// changes (to round-off), which lets `plan::translates_rigidly` columns leave all but the
+    /// world's contacts out of their supports. Every other position direction changes rows.
+    #[test]
+    fn translating_a_free_tree_changes_no_residual_row() {
+        let (m, mut s) = every_kind();
+        // every joint deflected and moving (springs loaded, joint impulses and spins non-zero)
+        let wave = |k: usize| ((k as f64 * 12.9898).sin() * 43758.5453).fract();
+        let qpos: Vec<f64> = (crate::qpos(&m, &s).iter().enumerate())
+            .map(|(k, q)| q + 0.2 * wave(k))
+            .collect();
+        let qvel: Vec<f64> = (0..m.nv).map(|k| 2.0 * wave(k + 1000)).collect();
+        crate::set_minimal(&m, &mut s, &qpos, &qvel).unwrap();
+        let below = subtrees(&m);
+        let mut ws = Workspace::new(&m);
+        crate::step(&m, &mut s.clone(), &mut ws, &[]).unwrap();
+        let w = ws.w.clone();
+        let point = Point::new(&m, &s, Coordinates::Minimal).unwrap();
+        let active = vec![false; ws.active.len()];
+        let mut probe = Probe::new(&m, &point, &[], (&active, &[]));
+        let inputs: Vec<Input> = (0..2 * m.nv).map(Input::State).collect();
+        let eps = steps(&m, &inputs);
+        let mut residual = |i: usize, sign: f64| {
+            probe.perturb(&inputs, &eps, &[i], sign);
+            probe.residual_full(&w);
+            probe.restore(&inputs, &[i]);
+            probe.residual.clone()
+        };
+        for i in 0..m.nv {
+            let (plus, minus) = (residual(i, 1.0), residual(i, -1.0));
+            let change = (plus.iter().zip(&minus))
+                .map(|(p, q)| (p - q).abs() / (2.0 * FD_STEP))
+                .fold(0.0, f64::max);
+            let translating = translates_rigidly(&m, Coordinates::Minimal, &below, i);
+            assert_eq!(translating, i < 3, "direction {i}");
+            if translating {
+                assert!(
+                    change < 1e-7,
+                    "direction {i} changes the residual by {change:e}"
+                );
+            } else {
+                assert!(change > 1e-3, "direction {i} changes nothing: {change:e}");
+            }
+        }
     }
 
     /// The bodies a state direction moves, known from the tree, are those perturbing the state

@@ -9,8 +9,8 @@ use std::sync::Arc;
 use super::partials::Input;
 use super::sparsity::{Interactions, Support, colour, neighbours, transmission_bodies};
 use super::tangent::Coordinates;
-use crate::model::Model;
 use crate::model::params::Param;
+use crate::model::{Model, Transmission};
 
 /// Where each column's entries start in `Partials::r_z` for the supports `rows`, and the
 /// total as the last entry.
@@ -66,6 +66,46 @@ pub(super) fn state_bodies(
     (bodies, moved)
 }
 
+/// Whether state tangent direction `i` translates a whole subtree rigidly, and nothing else
+/// of the step depends on where it is: a position dof of a free joint to the world (minimal
+/// coordinates), with no spring, limit or actuator of its own and no other joint between its
+/// subtree and the rest. Its body rows, joints, springs and self-contacts then read relative
+/// poses only (gravity and applied forces are uniform, site wrenches and joint Jacobians
+/// rotate with their bodies), so only the contacts between the subtree and the world or
+/// other trees change.
+pub(super) fn translates_rigidly(
+    model: &Model,
+    coords: Coordinates,
+    below: &[Vec<usize>],
+    i: usize,
+) -> bool {
+    if coords != Coordinates::Minimal || i >= model.nv {
+        return false;
+    }
+    let Some(ji) = model
+        .joints
+        .iter()
+        .position(|j| !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&i))
+    else {
+        return false;
+    };
+    let j = &model.joints[ji];
+    let free = j.parent == 0 && j.ncon() == 0 && i < j.qvel_adr + j.ntrans;
+    if !free || j.has_spring() || !j.limits.is_empty() {
+        return false;
+    }
+    let driven = model.actuators.iter().any(|a| match &a.transmission {
+        Transmission::Joint { joint, .. } => *joint == ji,
+        Transmission::Tendon(terms) => terms.iter().any(|t| t.0 == ji),
+        Transmission::Site { .. } => false,
+    });
+    let mut inside = vec![false; model.nbody()];
+    below[ji].iter().for_each(|&b| inside[b] = true);
+    let bridged = (model.joints.iter().enumerate())
+        .any(|(k, o)| k != ji && inside[o.parent] != inside[o.child]);
+    !driven && !bridged
+}
+
 /// Row supports of the columns that are not light at the activation `active` (a light
 /// column's rows come from the skeleton; its entry here is empty).
 fn supports(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> Vec<Support> {
@@ -77,6 +117,20 @@ fn supports(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> 
             _ if sk.light[c] => Support::default(),
             // the dofs of one joint move the same bodies
             Input::State(_) if sk.same_as[c] < c => sup[sk.same_as[c]].clone(),
+            Input::State(_) if sk.translating[c] => {
+                // the subtree moves rigidly: only its contacts with the world or other trees
+                let (_, moved) = &sk.bodies[c];
+                let mut inside = vec![false; model.nbody()];
+                moved.iter().for_each(|&b| inside[b] = true);
+                let boundary: Vec<usize> = (moved.iter())
+                    .flat_map(|&b| graph.body_contacts[b].iter().copied())
+                    .filter(|&k| {
+                        let [a, b] = model.topology.contact_bodies[k];
+                        inside[a] != inside[b]
+                    })
+                    .collect();
+                Support::new(model, &graph, &[], &[], &boundary, &[])
+            }
             Input::State(_) => {
                 let (touched, moved) = &sk.bodies[c];
                 Support::new(model, &graph, touched, moved, &[], moved)
@@ -111,7 +165,10 @@ struct Skeleton {
     light: Vec<bool>,
     /// Per state column, the bodies it touches and moves ([`state_bodies`]); empty otherwise.
     bodies: Vec<(Vec<usize>, Vec<usize>)>,
-    /// Per column, the first state column with the same bodies (itself if none before).
+    /// Per column, whether it translates its bodies rigidly ([`translates_rigidly`]).
+    translating: Vec<bool>,
+    /// Per column, the first state column with the same bodies and translation (itself if
+    /// none before).
     same_as: Vec<usize>,
     /// [`neighbours`].
     neighbours: Vec<Vec<usize>>,
@@ -150,11 +207,37 @@ impl Skeleton {
         }
         // (their velocity columns coloured apart for the forward kinematics they share)
         let light_groups = coloured_columns(&light_sup, |c| light[c], model);
-        let moved: Vec<&[usize]> = bodies.iter().map(|(_, m)| m.as_slice()).collect();
+        let translating: Vec<bool> = (inputs.iter())
+            .map(|input| match *input {
+                Input::State(i) => translates_rigidly(model, coords, &below, i),
+                _ => false,
+            })
+            .collect();
+        // a rigid translation moves the next state's coordinates of its own joint alone: the
+        // others are relative (the joint's child stands for it)
+        let own: Vec<Vec<usize>> = (inputs.iter().zip(&translating))
+            .map(|(input, &t)| match (*input, t) {
+                (Input::State(i), true) => {
+                    let j = model
+                        .joints
+                        .iter()
+                        .find(|j| !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&i));
+                    j.map(|j| vec![j.child]).unwrap_or_default()
+                }
+                _ => Vec::new(),
+            })
+            .collect();
+        let moved: Vec<&[usize]> = (bodies.iter().zip(&own).zip(&translating))
+            .map(|(((_, m), own), &t)| if t { own.as_slice() } else { m.as_slice() })
+            .collect();
         let same_as = (0..inputs.len())
             .map(|c| match inputs[c] {
                 Input::State(_) => (0..c)
-                    .find(|&k| matches!(inputs[k], Input::State(_)) && bodies[k] == bodies[c])
+                    .find(|&k| {
+                        matches!(inputs[k], Input::State(_))
+                            && bodies[k] == bodies[c]
+                            && translating[k] == translating[c]
+                    })
                     .unwrap_or(c),
                 _ => c,
             })
@@ -170,6 +253,7 @@ impl Skeleton {
             output: Arc::new(OutputPlan::new(model, coords, inputs, Some(&moved))),
             light,
             bodies,
+            translating,
         }
     }
 }

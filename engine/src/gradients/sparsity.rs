@@ -46,7 +46,7 @@ pub(super) struct Interactions<'n> {
     /// [`neighbours`].
     nbrs: &'n [Vec<usize>],
     /// Active contact candidates of each body.
-    body_contacts: Vec<Vec<usize>>,
+    pub body_contacts: Vec<Vec<usize>>,
     /// Active contact candidates of each geom.
     pub geom_contacts: Vec<Vec<usize>>,
 }
