@@ -477,6 +477,10 @@ pub struct Workspace {
     /// their own rows and limit rows are left stale (they lie outside the perturbation's
     /// support).
     pub(crate) joint_filter: Vec<bool>,
+    /// Bodies whose rows are written (empty: all). Set only by the gradients' partials with
+    /// [`Self::joint_filter`]: the other bodies' rows lie outside the perturbation's support, so
+    /// their momenta and the joint terms acting on them alone are not computed.
+    pub(crate) body_filter: Vec<bool>,
     /// Scalar force of each actuator (current state and controls).
     pub(crate) act_force: Vec<f64>,
     /// `∂k/∂x` of each joint coupling at the current configuration.
@@ -710,6 +714,7 @@ impl Workspace {
         self.joint_tau.fill([0.0; 6]);
         self.joint_q.fill([0.0; 7]);
         self.joint_filter.clear();
+        self.body_filter.clear();
         self.act_force.fill(0.0);
         self.coupling_slope.fill(0.0);
         // (`nt` is read only while `nt_on`, and every solve clears it first)
@@ -894,6 +899,7 @@ impl Workspace {
             joint_tau: vec![[0.0; 6]; model.njoint()],
             joint_q: vec![[0.0; 7]; model.njoint()],
             joint_filter: Vec::new(),
+            body_filter: Vec::new(),
             act_force: vec![0.0; model.nu()],
             coupling_slope: vec![0.0; model.couplings.len()],
             topology_id: model.topology_id(),

@@ -259,6 +259,7 @@ impl<'a> Probe<'a> {
     /// Full residual at `w` with the probe's inputs.
     fn residual_full(&mut self, w: &[f64]) {
         self.ws.joint_filter.clear();
+        self.ws.body_filter.clear();
         let forces = AppliedForces::default();
         let model = self.perturbed.as_ref().unwrap_or(self.base);
         newton::prepare_forces(model, &self.state, &mut self.ws, &self.ctrl, &forces);
@@ -273,17 +274,15 @@ impl<'a> Probe<'a> {
     /// Residual at `w` with only the contact candidates `contacts` (of those `active`)
     /// evaluated; the others are left out of both rows and impulses (they do not change).
     /// Likewise only the `joints` set are re-evaluated; the others keep their terms at the
-    /// unperturbed inputs, and their own rows are not written.
-    fn residual_restricted(
-        &mut self,
-        w: &[f64],
-        contacts: &[usize],
-        active: &[bool],
-        joints: &[bool],
-    ) {
+    /// unperturbed inputs, and their own rows are not written. Only the rows of the `bodies`
+    /// set are written of the body rows.
+    fn residual_restricted(&mut self, w: &[f64], active: &[bool], refresh: &Refresh) {
+        let (contacts, joints) = (&refresh.contacts, &refresh.joints);
         self.base_joints.restore(&mut self.ws);
         self.ws.joint_filter.clear();
         self.ws.joint_filter.extend_from_slice(joints);
+        self.ws.body_filter.clear();
+        self.ws.body_filter.extend_from_slice(&refresh.bodies);
         let (model, state) = (self.perturbed.as_ref().unwrap_or(self.base), &self.state);
         let forces = AppliedForces::default();
         newton::prepare_smooth_forces(model, state, &mut self.ws, &self.ctrl, &forces);
@@ -399,7 +398,7 @@ fn residual_columns(
         for sign in [1.0, -1.0] {
             probe.perturb(inputs, eps, group, sign);
             match refresh {
-                Some(r) => probe.residual_restricted(w, &r[k].contacts, &active, &r[k].joints),
+                Some(r) => probe.residual_restricted(w, &active, &r[k]),
                 None => probe.residual_full(w),
             }
             out.evaluations += 1;

@@ -10,6 +10,7 @@ use super::partials::Input;
 use super::sparsity::{Interactions, Support, colour, neighbours, transmission_bodies};
 use super::tangent::Coordinates;
 use crate::model::params::Param;
+use crate::model::topology_body_node as body_node;
 use crate::model::{Model, Transmission};
 
 /// Where each column's entries start in `Partials::r_z` for the supports `rows`, and the
@@ -338,9 +339,18 @@ impl Plan {
                     .iter()
                     .map(|j| touched[j.parent] || touched[j.child])
                     .collect();
+                // the bodies whose rows the group's supports hold
+                let mut in_group = vec![false; model.topology.pattern.nnodes()];
+                for &n in g.iter().flat_map(|&c| &sup[c].nodes) {
+                    in_group[n] = true;
+                }
+                let bodies = (0..model.nbody())
+                    .map(|b| body_node(b).is_some_and(|n| in_group[n]))
+                    .collect();
                 Refresh {
                     contacts: cs,
                     joints,
+                    bodies,
                 }
             })
             .collect();
@@ -463,6 +473,8 @@ pub(super) fn plan_for(
 pub(super) struct Refresh {
     pub(super) contacts: Vec<usize>,
     pub(super) joints: Vec<bool>,
+    /// The bodies whose rows its supports hold (the others' rows are not computed).
+    pub(super) bodies: Vec<bool>,
 }
 
 /// The joints whose output rows a group of body velocities covers, and those of them with

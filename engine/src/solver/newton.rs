@@ -125,7 +125,11 @@ pub(crate) fn prepare_smooth_forces(
         ws.joint_tau[ji] = tau;
     }
     super::actuation::actuator_forces(model, state, ws, ctrl);
+    let row = |ws: &Workspace, b: usize| b > 0 && (ws.body_filter.is_empty() || ws.body_filter[b]);
     for (ji, joint) in model.joints.iter().enumerate() {
+        if !row(ws, joint.parent) && !row(ws, joint.child) {
+            continue; // (its forces act on rows outside the body filter alone)
+        }
         let nf = joint.nfree();
         let mut tau = ws.joint_tau[ji];
         super::actuation::add_joint_forces(model, ws, ji, &mut tau[..nf]);
@@ -462,8 +466,10 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
         free_jac,
         free_adr,
         joint_filter,
+        body_filter,
         ..
     } = ws;
+    let row = |b: usize| b > 0 && (body_filter.is_empty() || body_filter[b]);
     for (b, body) in model.bodies.iter().enumerate().skip(1) {
         let (v, om) = w_body(model, w, b);
         let now = state.pose(b);
@@ -471,6 +477,9 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
             pos: now.pos + v * h,
             quat: now.quat * quat::step_map(&om, h),
         };
+        if !row(b) {
+            continue;
+        }
         let prev = state.velocity(b);
         let (lin, rot) = momentum_residual(
             body.mass,
@@ -491,7 +500,7 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
             let (o, adr) = (model.topology.pattern.offset(n), model.topology.con_adr[ji]);
             let k = &jac_now[12 * adr..12 * (adr + ncon)];
             for (side, b) in [(0, joint.parent), (1, joint.child)] {
-                if b == 0 {
+                if !row(b) {
                     continue;
                 }
                 let ob = body_slot(model, b);
@@ -514,6 +523,9 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
             if joint_filter.is_empty() || joint_filter[ji] {
                 JointFrame::new(joint, &np, &nc).constraint(joint, &mut residual[o..o + ncon]);
             }
+        }
+        if !row(joint.parent) && !row(joint.child) {
+            continue; // (its damper and armature act on these bodies' rows alone)
         }
         if joint.has_damper() {
             add_damper_residual(model, joint, &free_jac[free_adr[ji]..], w, residual, h);
