@@ -138,7 +138,9 @@ fn the_pandas_finger_pad_stalls_end_early_on_the_same_states() {
     // iterations; since the pads' upper corners stay inactive (`solver::activation`) and
     // stalled attempts end at `stall_iter`, seeds 4, 10 and 13 stall in 1, 2 and 2 steps,
     // 2135 → 2045, 1843 → 1707 and 2238 → 2113 iterations; since a body's box corners on one
-    // geom are grouped (session 29), 3 steps stall in all, 6200 → 5960 iterations).
+    // geom are grouped (session 29), 3 steps stall in all, 6200 → 5960 iterations; since the
+    // finger coupling is eliminated below the hand (session 34: the same steps to round-off,
+    // then other trajectories), 1 step stalls, 6437 → 6316).
     // Every step of the runs without the early stop is also solved from the same state with it
     // (friction cones judged by their whole Jordan product, whose vector part stalls there,
     // and the pads' friction kept: held at zero, the pads no longer stall in these runs)
@@ -188,7 +190,7 @@ fn the_pandas_finger_pad_stalls_end_early_on_the_same_states() {
         "{stopped} steps stopped early: {its_early} iterations instead of {its_full}; positions within {worst:.1e} m"
     );
     assert!(
-        stopped > 0 && its_full - its_early > 200,
+        stopped > 0 && its_full - its_early > 100,
         "{its_early} vs {its_full}"
     );
     // the stalled grasp's positions are determined to a few micrometres at these residuals

@@ -3,10 +3,11 @@
 //!
 //! Elimination order: post-order over the spanning tree in which each body hangs below its parent
 //! joint and each joint below its parent body, so every joint is eliminated after the subtree it
-//! carries (its pivot is then the negative-definite Schur complement `-K M⁻¹ Kᵀ`); loop-closing
-//! joints come last, then joint couplings and tendon limits (nodes touching the bodies of
-//! several joints). Trees have no fill-in; loops fill in along their cycle only, couplings and
-//! tendon limits along the tree paths between their bodies.
+//! carries (its pivot is then the negative-definite Schur complement `-K M⁻¹ Kᵀ`); a joint
+//! coupling or tendon limit (a node touching the bodies of several joints) comes just before the
+//! lowest body above all of its joints, and loop-closing joints last. Trees have no fill-in;
+//! loops fill in along their cycle only, couplings and tendon limits along the tree paths
+//! between their bodies and that body.
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::contact::{Contact, ContactModel, Geom};
@@ -139,8 +140,8 @@ impl Topology {
             let (o, q) = c.model.cones();
             cone_degree += o + q;
         }
-        // tendon limits: inequality nodes, but eliminated last (they touch several joints'
-        // bodies: as leaves they would fill in between all of them)
+        // tendon limits: inequality nodes, but eliminated with the couplings (they touch
+        // several joints' bodies: as leaves they would fill in between all of them)
         let mut tendon_node = Vec::with_capacity(tendons.len());
         let mut tendon_bodies = Vec::with_capacity(tendons.len());
         for t in tendons {
@@ -186,9 +187,23 @@ impl Topology {
             }
         }
         // contact and joint-limit nodes are leaves: eliminated first; couplings and tendon
-        // limits last
+        // limits below the lowest body above their joints (`elimination_order`)
         let mut order = leaves.clone();
-        let late: Vec<usize> = coupling_node.iter().chain(&tendon_node).copied().collect();
+        // couplings and tendon limits with the joints of their terms
+        let mut late: Vec<(usize, Vec<usize>)> = (couplings.iter().zip(&coupling_node))
+            .map(|(c, &n)| {
+                (
+                    n,
+                    std::iter::once(c.joint1.0)
+                        .chain(c.joint2.map(|t| t.0))
+                        .collect(),
+                )
+            })
+            .collect();
+        late.extend(
+            (tendons.iter().zip(&tendon_node))
+                .map(|(t, &n)| (n, t.terms.iter().map(|t| t.0).collect())),
+        );
         order.extend(elimination_order(
             nmoving,
             joints,
@@ -340,8 +355,39 @@ fn fk_order(joints: &[Joint], parent_joint: &[Option<usize>]) -> Vec<usize> {
     order
 }
 
-/// Post-order of the node tree (children before parents), loop joints and the `late` nodes
-/// (couplings, tendon limits) last.
+/// The body below which a coupling or tendon limit over the joints `terms` is eliminated: the
+/// lowest common ancestor of the terms' bodies, when it is a moving body that is no term's
+/// child (every term's child is then eliminated before it, so its pivot holds each term's
+/// free motion); `None` otherwise (a term on the world or on a loop joint).
+fn late_parent(joints: &[Joint], parent_joint: &[Option<usize>], terms: &[usize]) -> Option<usize> {
+    let up = |b: usize| parent_joint[b].map_or(0, |j| joints[j].parent);
+    let path = |mut b: usize| {
+        let mut p = vec![b];
+        while b != 0 {
+            b = up(b);
+            p.push(b);
+        }
+        p
+    };
+    if terms.iter().any(|&j| joints[j].is_loop) {
+        return None;
+    }
+    let mut common = path(joints[*terms.first()?].parent);
+    for &j in terms {
+        for b in [joints[j].parent, joints[j].child] {
+            let p = path(b);
+            common.retain(|a| p.contains(a));
+        }
+    }
+    let lca = *common.first()?;
+    (lca != 0 && terms.iter().all(|&j| joints[j].child != lca)).then_some(lca)
+}
+
+/// Post-order of the node tree (children before parents), each coupling or tendon limit of
+/// `late` (node, term joints) just before the body below which all its terms lie
+/// ([`late_parent`]: it then fills in between its terms' bodies and that body alone, where
+/// eliminated last it filled in along the whole path to the root, and the humanoid's two
+/// hamstring tendons with each other); loop joints and the late nodes over the world last.
 fn elimination_order(
     nmoving: usize,
     joints: &[Joint],
@@ -349,8 +395,17 @@ fn elimination_order(
     joint_node: &[Option<usize>],
     nnodes: usize,
     leaves: &[usize],
-    late: &[usize],
+    late: &[(usize, Vec<usize>)],
 ) -> Vec<usize> {
+    let mut before: Vec<Vec<usize>> = vec![Vec::new(); nnodes];
+    let mut last = Vec::new();
+    for (n, terms) in late {
+        match late_parent(joints, parent_joint, terms).and_then(body_node) {
+            Some(b) => before[b].push(*n),
+            None => last.push(*n),
+        }
+    }
+    let late: Vec<usize> = late.iter().map(|&(n, _)| n).collect();
     // parent node of every node in the elimination tree (None = root)
     let mut up: Vec<Option<usize>> = vec![None; nnodes];
     for b in 1..=nmoving {
@@ -388,11 +443,12 @@ fn elimination_order(
                 stack.push((n, i + 1));
                 stack.push((children[n][i], 0));
             } else {
+                order.extend(&before[n]);
                 order.push(n);
             }
         }
     }
     order.extend(loops);
-    order.extend(late);
+    order.extend(last);
     order
 }
