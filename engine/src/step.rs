@@ -94,7 +94,7 @@ pub fn step_with(
     // * the step with pyramid friction cones, then the exact cones warm-started from its
     //   impulses (`Options::pyramid_fallback`): the humanoid's seed-155 step 188 jams the
     //   exact cones from the previous step's impulses and converges from the pyramid's; its
-    //   seed-253 step 845 jams the pyramid too and converges from its last iterate's;
+    //   seed-21 step 591 jams the pyramid too and converges from its last iterate's;
     // * the exact problem: no friction held by `drop_redundant_friction`'s shortcuts (the
     //   humanoid's seed-13 step 127, `tests/hard_steps.rs`, fails every attempt with them and
     //   converges without; it converges from the pyramid's impulses too, which come first as

@@ -235,12 +235,12 @@ fn a_jammed_step_converges_from_the_pyramids_impulses() {
     jammed_step_converges_from_the_pyramids_impulses(155, 188);
 }
 
-/// Seed 253's step 845: the left shin loaded on the floor among ~15 sliding contacts. The
-/// pyramid jams too (4671 iterations, residual 4.9e-6), and from its last iterate's impulses the
-/// exact cones converge.
+/// Seed 21's step 591 (found in session 34, when seed 253's step 845 of session 32 no longer
+/// jammed: the coupling elimination order moved the trajectory): the pyramid jams too, and from
+/// its last iterate's impulses the exact cones converge (2849 iterations in all).
 #[test]
 fn a_step_that_jams_the_pyramid_too_converges_from_its_last_iterate() {
-    jammed_step_converges_from_the_pyramids_impulses(253, 845);
+    jammed_step_converges_from_the_pyramids_impulses(21, 591);
 }
 
 /// The shared Panda's seed-371 step 159 under the default options (found in session 32): both

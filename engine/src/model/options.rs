@@ -104,8 +104,8 @@ pub struct Options {
     /// failed. Why: the shared humanoid with its legs crossed and a foot sliding
     /// (`step_bench humanoid.xml 1000 1 155`, step 188) jams the exact cones from the previous
     /// step's impulses on every attempt (~3100 iterations, then unconverged); the pyramid
-    /// converges in ~20 iterations and the exact cones from its impulses in ~10 (seed 253's
-    /// step 845 jams the pyramid too, and converges from its last iterate's impulses).
+    /// converges in ~20 iterations and the exact cones from its impulses in ~10 (seed 21's
+    /// step 591 jams the pyramid too, and converges from its last iterate's impulses).
     pub pyramid_fallback: bool,
     /// The central-path target never goes below `kappa_tol / undercut` (Dojo's undercut). Default 10.
     pub undercut: f64,
