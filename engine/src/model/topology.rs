@@ -452,3 +452,76 @@ fn elimination_order(
     order.extend(last);
     order
 }
+
+#[cfg(test)]
+mod tests {
+    use super::body_node;
+
+    /// A parallel gripper on a three-link arm: two finger slides on the hand, held symmetric by
+    /// a joint equality (a coupling node), a motor on one finger.
+    const GRIPPER: &str = r#"<mujoco><option gravity="0 0 -9.81" timestep="0.01"/><worldbody>
+      <body name="l1"><joint name="j1" type="hinge" axis="0 0 1"/>
+        <inertial pos=".15 0 0" mass="1" diaginertia=".01 .01 .01"/>
+        <body name="l2" pos=".3 0 0"><joint name="j2" type="hinge" axis="0 1 0"/>
+          <inertial pos=".15 0 0" mass="1" diaginertia=".01 .01 .01"/>
+          <body name="hand" pos=".3 0 0"><joint name="j3" type="hinge" axis="1 0 0"/>
+            <inertial pos="0 0 0" mass=".5" diaginertia=".001 .001 .001"/>
+            <body name="f1" pos="0 .02 0"><joint name="x" type="slide" axis="0 1 0"/>
+              <inertial pos="0 0 0" mass=".05" diaginertia="1e-5 1e-5 1e-5"/></body>
+            <body name="f2" pos="0 -.02 0"><joint name="y" type="slide" axis="0 -1 0"/>
+              <inertial pos="0 0 0" mass=".05" diaginertia="1e-5 1e-5 1e-5"/></body>
+          </body></body></body></worldbody>
+      <equality><joint joint1="y" joint2="x"/></equality>
+      <actuator><motor joint="x"/></actuator></mujoco>"#;
+
+    /// The finger coupling is eliminated just before the hand: it fills in with the hand alone,
+    /// not with the arm's links and joints on the way to the root (as when it came last).
+    #[test]
+    fn a_finger_coupling_fills_in_below_the_hand_only() {
+        let m = crate::mjcf::load_str(GRIPPER, "gripper").unwrap().model;
+        let t = &m.topology;
+        let c = t.coupling_node[0];
+        let body = |name: &str| body_node(m.body_id(name).unwrap()).unwrap();
+        let joint = |name: &str| t.joint_node[m.joint_id(name).unwrap()].unwrap();
+        for n in [body("f1"), body("f2"), body("hand")] {
+            assert!(t.pattern.block(c, n).is_some(), "node {n}");
+        }
+        for n in [
+            body("l1"),
+            body("l2"),
+            joint("j1"),
+            joint("j2"),
+            joint("j3"),
+        ] {
+            assert!(t.pattern.block(c, n).is_none(), "fill with node {n}");
+        }
+    }
+
+    /// The gripper's coupling holds while the arm swings under gravity and a finger is driven
+    /// (the coupling's pivot, taken before the hand's, holds the fingers' free motion).
+    #[test]
+    fn a_finger_coupling_holds_on_a_swinging_arm() {
+        let m = crate::mjcf::load_str(GRIPPER, "gripper").unwrap().model;
+        let mut s = crate::State::reference(&m);
+        let q0 = crate::qpos(&m, &s);
+        let mut qv = vec![0.0; m.nv];
+        qv[..3].copy_from_slice(&[1.0, -0.5, 2.0]);
+        crate::set_minimal(&m, &mut s, &q0, &qv).unwrap();
+        let mut ws = crate::Workspace::new(&m);
+        let (x, y) = (m.joint_id("x").unwrap(), m.joint_id("y").unwrap());
+        let (ax, ay) = (m.joints[x].qpos_adr, m.joints[y].qpos_adr);
+        for k in 0..100 {
+            let r = crate::step(&m, &mut s, &mut ws, &[0.2 * (0.1 * k as f64).sin()]).unwrap();
+            assert!(r.status.is_success(), "step {k}: {r:?}");
+            let q = crate::qpos(&m, &s);
+            assert!(
+                (q[ay] - q[ax]).abs() < 1e-9,
+                "step {k}: {} vs {}",
+                q[ay],
+                q[ax]
+            );
+        }
+        let q = crate::qpos(&m, &s);
+        assert!(q[ax].abs() > 1e-3, "the fingers did not move: {}", q[ax]);
+    }
+}
