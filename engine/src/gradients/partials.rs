@@ -368,6 +368,7 @@ pub(super) fn partials(
     let refresh = plan.refresh.as_deref();
     residual_columns(&mut probe, &mut out, inputs, &eps, w, &plan.groups, refresh);
     light_columns(&mut probe, &mut out, inputs, &eps, &plan.light_groups);
+    plane_columns(&mut out, &plan.plane_columns);
     output_partials(
         &mut probe,
         &mut out,
@@ -503,6 +504,15 @@ fn light_columns(
         if !states.is_empty() {
             probe.restore(inputs, &states);
         }
+    }
+}
+
+/// `∂R/∂z` of the translation columns whose tree meets the rest only at world planes: their
+/// entries are the plan's (`plan::plane_entries`).
+fn plane_columns(out: &mut Partials, columns: &[(usize, Vec<f64>)]) {
+    for (c, entries) in columns {
+        let start = out.r_start[*c];
+        out.r_z[start..start + entries.len()].copy_from_slice(entries);
     }
 }
 

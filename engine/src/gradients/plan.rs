@@ -9,6 +9,7 @@ use std::sync::Arc;
 use super::partials::Input;
 use super::sparsity::{Interactions, Support, colour, neighbours, transmission_bodies};
 use super::tangent::Coordinates;
+use crate::contact::geometry::Shape;
 use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
 use crate::model::{Model, Transmission};
@@ -107,10 +108,50 @@ pub(super) fn translates_rigidly(
     !driven && !bridged
 }
 
+/// The active contact candidates between the bodies `moved` and the rest (the world or other
+/// trees), in candidate order.
+fn boundary_contacts(model: &Model, graph: &Interactions, moved: &[usize]) -> Vec<usize> {
+    let mut inside = vec![false; model.nbody()];
+    moved.iter().for_each(|&b| inside[b] = true);
+    let mut boundary: Vec<usize> = (moved.iter())
+        .flat_map(|&b| graph.body_contacts[b].iter().copied())
+        .filter(|&k| {
+            let [a, b] = model.topology.contact_bodies[k];
+            inside[a] != inside[b]
+        })
+        .collect();
+    boundary.sort_unstable();
+    boundary
+}
+
+/// The world plane of contact candidate `k`, if one of its geoms is a plane on the world.
+pub(super) fn world_plane(model: &Model, k: usize) -> Option<usize> {
+    let c = &model.contacts[k];
+    [c.geom_a, c.geom_b]
+        .into_iter()
+        .find(|&g| model.geoms[g].body == 0 && matches!(model.geoms[g].shape, Shape::Plane))
+}
+
+/// `∂R/∂z` of a translation column on the gap rows of the candidates `contacts` between its
+/// tree and the rest, when all of them are against world planes (`None` otherwise).
+/// Translating the tree by `d` per unit of the coordinate moves each gap to a plane of normal
+/// `n` (its z axis) by `n·d` (a gap to a plane is `nᵀ(x − o)` of a point moving with the body,
+/// whatever its feature), and nothing else of the residual ([`translates_rigidly`]); a gap
+/// enters its candidate's first row as `-φ` in every contact model.
+fn plane_entries(model: &Model, input: Input, contacts: &[usize]) -> Option<Vec<f64>> {
+    let Input::State(i) = input else { return None };
+    let j = (model.joints.iter())
+        .find(|j| !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&i))?;
+    // the child's world displacement per unit of the coordinate (its parent is the world)
+    let d = crate::math::quat::rotation(&j.offset) * j.trans_basis.column(i - j.qvel_adr);
+    (contacts.iter())
+        .map(|&k| Some(-model.geoms[world_plane(model, k)?].rot.column(2).dot(&d)))
+        .collect()
+}
+
 /// Row supports of the columns that are not light at the activation `active` (a light
 /// column's rows come from the skeleton; its entry here is empty).
-fn supports(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> Vec<Support> {
-    let graph = Interactions::new(model, &sk.neighbours, active);
+fn supports(model: &Model, graph: &Interactions, inputs: &[Input], sk: &Skeleton) -> Vec<Support> {
     let all: Vec<usize> = (1..model.nbody()).collect();
     let mut sup: Vec<Support> = Vec::with_capacity(inputs.len());
     for (c, input) in inputs.iter().enumerate() {
@@ -120,36 +161,27 @@ fn supports(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> 
             Input::State(_) if sk.same_as[c] < c => sup[sk.same_as[c]].clone(),
             Input::State(_) if sk.translating[c] => {
                 // the subtree moves rigidly: only its contacts with the world or other trees
-                let (_, moved) = &sk.bodies[c];
-                let mut inside = vec![false; model.nbody()];
-                moved.iter().for_each(|&b| inside[b] = true);
-                let boundary: Vec<usize> = (moved.iter())
-                    .flat_map(|&b| graph.body_contacts[b].iter().copied())
-                    .filter(|&k| {
-                        let [a, b] = model.topology.contact_bodies[k];
-                        inside[a] != inside[b]
-                    })
-                    .collect();
-                Support::new(model, &graph, &[], &[], &boundary, &[])
+                let boundary = boundary_contacts(model, graph, &sk.bodies[c].1);
+                Support::new(model, graph, &[], &[], &boundary, &[])
             }
             Input::State(_) => {
                 let (touched, moved) = &sk.bodies[c];
-                Support::new(model, &graph, touched, moved, &[], moved)
+                Support::new(model, graph, touched, moved, &[], moved)
             }
             Input::Ctrl(_) => unreachable!("control columns are light"),
             Input::Param(p) => match p {
                 Param::Mass(b) | Param::Inertia(b, _, _) => {
-                    Support::new(model, &graph, &[b], &[], &[], &[])
+                    Support::new(model, graph, &[b], &[], &[], &[])
                 }
                 Param::Friction(g) | Param::Size(g, _) | Param::GeomPos(g, _) => {
-                    Support::new(model, &graph, &[], &[], &graph.geom_contacts[g], &[])
+                    Support::new(model, graph, &[], &[], &graph.geom_contacts[g], &[])
                 }
                 Param::Stiffness(j, _) | Param::Damping(j, _) => {
                     let joint = &model.joints[j];
                     let bodies = [joint.parent, joint.child];
-                    Support::new(model, &graph, &bodies, &[], &[], &bodies)
+                    Support::new(model, graph, &bodies, &[], &[], &bodies)
                 }
-                Param::Gravity(_) => Support::new(model, &graph, &all, &[], &[], &[]),
+                Param::Gravity(_) => Support::new(model, graph, &all, &[], &[], &[]),
                 Param::Timestep => Support::everything(model),
             },
         };
@@ -302,24 +334,47 @@ pub(super) struct Plan {
     pub(super) refresh: Option<Vec<Refresh>>,
     /// The light columns' groups (closed form, [`light_columns`]); empty column by column.
     pub(super) light_groups: Vec<Vec<usize>>,
+    /// Translation columns whose tree meets the rest only at world planes, with their entries
+    /// on `rows` (one per candidate, its gap's row): closed form, no evaluation
+    /// ([`plane_entries`]).
+    pub(super) plane_columns: Vec<(usize, Vec<f64>)>,
     pub(super) output: Arc<OutputPlan>,
 }
 
 impl Plan {
     /// Coloured: supports from the interaction graph of the activation `active`.
     fn coloured(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> Plan {
-        let sup = supports(model, active, inputs, sk);
+        let graph = Interactions::new(model, &sk.neighbours, active);
+        let sup = supports(model, &graph, inputs, sk);
+        // a rigid translation against world planes only moves their gaps, by n·d: the gap
+        // rows of those candidates are its whole column
+        let plane: Vec<Option<(Vec<usize>, Vec<f64>)>> = (0..inputs.len())
+            .map(|c| {
+                let boundary =
+                    sk.translating[c].then(|| boundary_contacts(model, &graph, &sk.bodies[c].1))?;
+                let entries = plane_entries(model, inputs[c], &boundary)?;
+                Some((boundary, entries))
+            })
+            .collect();
+        let p = &model.topology.pattern;
         let rows: Vec<Vec<(usize, usize)>> = sup
             .iter()
             .zip(&sk.light_rows)
             .enumerate()
-            .map(|(c, (s, light))| match sk.light[c] {
-                true => light.clone(),
-                false => node_rows(model, &s.nodes),
+            .map(|(c, (s, light))| match (sk.light[c], &plane[c]) {
+                (true, _) => light.clone(),
+                (false, Some((ks, _))) => ks
+                    .iter()
+                    .map(|&k| (p.offset(model.topology.contact_node[k]), 1))
+                    .collect(),
+                (false, None) => node_rows(model, &s.nodes),
             })
             .collect();
-        // full columns by coloured residual evaluations, light ones in closed form
-        let groups = coloured_columns(&sup, |c| !sk.light[c], model);
+        // full columns by coloured residual evaluations, light and plane ones in closed form
+        let groups = coloured_columns(&sup, |c| !sk.light[c] && plane[c].is_none(), model);
+        let plane_columns = (plane.into_iter().enumerate())
+            .filter_map(|(c, p)| Some((c, p?.1)))
+            .collect();
         // contacts and joints each group must refresh
         let refresh: Vec<Refresh> = groups
             .iter()
@@ -360,6 +415,7 @@ impl Plan {
             groups,
             refresh: Some(refresh),
             light_groups: sk.light_groups.clone(),
+            plane_columns,
             output: sk.output.clone(),
         }
     }
@@ -378,6 +434,7 @@ impl Plan {
             groups: (0..inputs.len()).map(|c| vec![c]).collect(),
             refresh: None,
             light_groups: Vec::new(),
+            plane_columns: Vec::new(),
             output: Arc::new(OutputPlan::new(model, coords, inputs, None)),
         }
     }
