@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
 import ukemi
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _sb3_logs_in_pytest_tmp(tmp_path_factory):
+    """stable-baselines3 makes an (empty) log folder in the system temp dir at every `learn`
+    unless told where: keep them in pytest's own temp dir (examples run as subprocesses
+    inherit it)."""
+    os.environ.setdefault("SB3_LOGDIR", str(tmp_path_factory.mktemp("sb3")))
 
 
 def pendulum(timestep=0.01, length=1.0, damping=0.0, actuated=True):
