@@ -68,6 +68,12 @@ pub(super) fn state_bodies(
     (bodies, moved)
 }
 
+/// The tree joint whose velocity coordinates hold `qvel` index `i`.
+fn dof_joint(model: &Model, i: usize) -> Option<usize> {
+    (model.joints.iter())
+        .position(|j| !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&i))
+}
+
 /// Whether state tangent direction `i` translates a whole subtree rigidly, and nothing else
 /// of the step depends on where it is: a position dof of a free joint to the world (minimal
 /// coordinates), with no spring, limit or actuator of its own and no other joint between its
@@ -84,11 +90,7 @@ pub(super) fn translates_rigidly(
     if coords != Coordinates::Minimal || i >= model.nv {
         return false;
     }
-    let Some(ji) = model
-        .joints
-        .iter()
-        .position(|j| !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&i))
-    else {
+    let Some(ji) = dof_joint(model, i) else {
         return false;
     };
     let j = &model.joints[ji];
@@ -140,8 +142,7 @@ pub(super) fn world_plane(model: &Model, k: usize) -> Option<usize> {
 /// enters its candidate's first row as `-φ` in every contact model.
 fn plane_entries(model: &Model, input: Input, contacts: &[usize]) -> Option<Vec<f64>> {
     let Input::State(i) = input else { return None };
-    let j = (model.joints.iter())
-        .find(|j| !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&i))?;
+    let j = &model.joints[dof_joint(model, i)?];
     // the child's world displacement per unit of the coordinate (its parent is the world)
     let d = crate::math::quat::rotation(&j.offset) * j.trans_basis.column(i - j.qvel_adr);
     (contacts.iter())
@@ -251,11 +252,7 @@ impl Skeleton {
         let own: Vec<Vec<usize>> = (inputs.iter().zip(&translating))
             .map(|(input, &t)| match (*input, t) {
                 (Input::State(i), true) => {
-                    let j = model
-                        .joints
-                        .iter()
-                        .find(|j| !j.is_loop && (j.qvel_adr..j.qvel_adr + j.nfree()).contains(&i));
-                    j.map(|j| vec![j.child]).unwrap_or_default()
+                    dof_joint(model, i).map_or_else(Vec::new, |j| vec![model.joints[j].child])
                 }
                 _ => Vec::new(),
             })
