@@ -530,6 +530,11 @@ fn output_partials(
     let model = probe.base;
     let ny = out.y_z.nrows();
     let (mut yp, mut ym) = (vec![0.0; ny], vec![0.0; ny]);
+    for &c in &plan.unit_cols {
+        for &i in &plan.col_rows[c] {
+            out.y_z[(i, c)] = 1.0;
+        }
+    }
     for (group, js) in &plan.z_groups {
         for (sign, y) in [(1.0, &mut yp), (-1.0, &mut ym)] {
             probe.perturb(inputs, eps, group, sign);

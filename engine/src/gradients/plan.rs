@@ -280,7 +280,13 @@ impl Skeleton {
                 .map(|s| node_rows(model, &s.nodes))
                 .collect(),
             light_groups,
-            output: Arc::new(OutputPlan::new(model, coords, inputs, Some(&moved))),
+            output: Arc::new(OutputPlan::new(
+                model,
+                coords,
+                inputs,
+                Some(&moved),
+                &translating,
+            )),
             light,
             bodies,
             translating,
@@ -432,7 +438,7 @@ impl Plan {
             refresh: None,
             light_groups: Vec::new(),
             plane_columns: Vec::new(),
-            output: Arc::new(OutputPlan::new(model, coords, inputs, None)),
+            output: Arc::new(OutputPlan::new(model, coords, inputs, None, &[])),
         }
     }
 }
@@ -550,6 +556,11 @@ pub(super) struct OutputPlan {
     pub(super) w_groups: Vec<(Vec<usize>, Option<JointsCovered>)>,
     /// The joint of each velocity coordinate.
     pub(super) dof_joint: Vec<usize>,
+    /// Translation columns ([`translates_rigidly`]): a rigid translation by `ε` moves the next
+    /// state's own coordinate by `ε` and nothing else (the next position is the current one
+    /// plus the step's travel; the other coordinates are relative), so `∂Y/∂z` is its unit
+    /// row, with no evaluation.
+    pub(super) unit_cols: Vec<usize>,
 }
 
 impl OutputPlan {
@@ -560,10 +571,13 @@ impl OutputPlan {
         coords: Coordinates,
         inputs: &[Input],
         moved: Option<&[&[usize]]>,
+        translating: &[bool],
     ) -> Self {
         let ny = coords.dim(model);
+        let unit = |c: usize| translating.get(c).copied().unwrap_or(false);
         let cols: Vec<usize> = (0..inputs.len())
             .filter(|&c| matches!(inputs[c], Input::State(_) | Input::Param(Param::Timestep)))
+            .filter(|&c| !unit(c))
             .collect();
         // output rows of each column: those of the bodies it moves (a body's next state is its
         // own pose stepped by its velocity in `w`; the current velocities do not enter)
@@ -571,6 +585,7 @@ impl OutputPlan {
         let col_rows: Vec<Support> = (0..inputs.len())
             .map(|c| {
                 let mut nodes: Vec<usize> = match (moved, inputs[c]) {
+                    (_, Input::State(i)) if unit(c) => vec![i],
                     (Some(moved), Input::State(_)) => moved[c]
                         .iter()
                         .flat_map(|&b| body_rows[b - 1].nodes.iter().copied())
@@ -662,6 +677,7 @@ impl OutputPlan {
             })
             .collect();
         OutputPlan {
+            unit_cols: (0..inputs.len()).filter(|&c| unit(c)).collect(),
             col_rows: col_rows.into_iter().map(|s| s.nodes).collect(),
             z_groups,
             body_rows: rows.into_iter().map(|s| s.nodes).collect(),
