@@ -111,19 +111,17 @@ pub(super) fn translates_rigidly(
 }
 
 /// The active contact candidates between the bodies `moved` and the rest (the world or other
-/// trees), in candidate order.
+/// trees).
 fn boundary_contacts(model: &Model, graph: &Interactions, moved: &[usize]) -> Vec<usize> {
     let mut inside = vec![false; model.nbody()];
     moved.iter().for_each(|&b| inside[b] = true);
-    let mut boundary: Vec<usize> = (moved.iter())
+    (moved.iter())
         .flat_map(|&b| graph.body_contacts[b].iter().copied())
         .filter(|&k| {
             let [a, b] = model.topology.contact_bodies[k];
             inside[a] != inside[b]
         })
-        .collect();
-    boundary.sort_unstable();
-    boundary
+        .collect()
 }
 
 /// The world plane of contact candidate `k`, if one of its geoms is a plane on the world.
@@ -353,8 +351,8 @@ impl Plan {
         // rows of those candidates are its whole column
         let plane: Vec<Option<(Vec<usize>, Vec<f64>)>> = (0..inputs.len())
             .map(|c| {
-                let boundary =
-                    sk.translating[c].then(|| boundary_contacts(model, &graph, &sk.bodies[c].1))?;
+                // (a translation column's support holds exactly its boundary candidates)
+                let boundary = sk.translating[c].then(|| sup[c].contacts.clone())?;
                 let entries = plane_entries(model, inputs[c], &boundary)?;
                 Some((boundary, entries))
             })
