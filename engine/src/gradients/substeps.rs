@@ -138,8 +138,8 @@ fn attempts(
         Ok(sub) => Ok(StoredStep::Substeps(sub)),
         Err(e) if !converged => {
             match long_solve(model, state, ws, ctrl, &Default::default(), false)? {
-                Some((_, report)) => Ok(StoredStep::Whole(StoredSolution::of(ws, report))),
-                None => Err(e),
+                Ok((_, report)) => Ok(StoredStep::Whole(StoredSolution::of(ws, report))),
+                Err(_) => Err(e),
             }
         }
         Err(_) => {
