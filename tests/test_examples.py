@@ -34,6 +34,21 @@ def test_box_push_example_reproduces_the_friction_kink(tmp_path):
     assert (tmp_path / "b.png").exists()
 
 
+def test_smoothing_bias_grows_with_kappa():
+    """Reduced run of examples/benchmarks/smoothing_bias.py on the shared X2: the smoothed step
+    departs from the hard one in proportion to κ (every pair pushes with κ / gap), and at
+    κ = 1e-8 by under 1e-5 rad/s."""
+    x2 = EXAMPLES.parents[1] / "shared" / "models" / "x2.xml"
+    if not x2.exists():
+        pytest.skip("../shared/models is not here")
+    rows = run("benchmarks/smoothing_bias", "--models", str(x2), "--kappa", "1e-8", "1e-6",
+               "1e-4", "--steps", "30", "--every", "10")
+    bias = {r["kappa"]: r["median"] for r in rows}
+    assert bias[1e-8] < 1e-5
+    for lo, hi in [(1e-8, 1e-6), (1e-6, 1e-4)]:
+        assert 30 < bias[hi] / bias[lo] < 300, bias
+
+
 def test_jax_throw_example_reduces_the_distance():
     pytest.importorskip("jax")
     err = run("jax_throw", "--iters", "4", "--steps", "60")
