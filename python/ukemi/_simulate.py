@@ -70,7 +70,8 @@ def step(model, state, ctrl=None, *, qfrc_applied=None, xfrc_applied=None, on_fa
 
 def step_smoothed(model, state, ctrl=None, *, kappa):
     """The smoothed step: the next state on the central path at ``kappa`` (every contact and
-    limit pair at ``b ∘ c = kappa e``), the map whose derivatives ``kappa_grad=kappa`` gives.
+    limit pair the hard step activated at ``b ∘ c = kappa e``, the others without impulse), the
+    map whose derivatives ``kappa_grad=kappa`` gives.
 
     Args:
         model, state, ctrl: as for :func:`step`.
