@@ -471,16 +471,12 @@ impl SolveLinearization {
         let t0 = Instant::now();
         validate_inputs(model, &point.state, &ws, ctrl, &AppliedForces::default())?;
         let forces = AppliedForces::default();
-        if kappa_grad.is_none() {
-            // the stored solve fixed the contact activation: only the forces and the active
-            // candidates' geometry are read (`evaluate` prepares those), not a new solve's
-            // activation search over every candidate (a tenth of a Panda's reverse step)
-            ws.prepared.fill(false);
-            newton::prepare_smooth_forces(model, &point.state, &mut ws, ctrl, &forces);
-        } else {
-            // the central-path solve may widen the activation: prepare every candidate
-            newton::prepare(model, &point.state, &mut ws, ctrl, &forces);
-        }
+        // the stored solve fixed the contact activation (the central-path solve keeps it too):
+        // only the forces and the active candidates' geometry are read (`evaluate` prepares
+        // those), not a new solve's activation search over every candidate (a tenth of a
+        // Panda's reverse step)
+        ws.prepared.fill(false);
+        newton::prepare_smooth_forces(model, &point.state, &mut ws, ctrl, &forces);
         ws.w.copy_from_slice(&stored.w);
         ws.active.copy_from_slice(&stored.active);
         ws.saturated.copy_from_slice(&stored.saturated);
