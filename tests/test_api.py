@@ -132,7 +132,7 @@ def test_iteration_counts_reject_negative_values_by_name(pend):
 
 def test_switch_options_must_be_bools_and_are_named(pend):
     # 1, "yes" or None-like strings would be silent typos: a TypeError that names the option
-    for name in ("warm_start", "nt_scaling", "central_warm_start", "cone_gap",
+    for name in ("warm_start", "nt_scaling", "central_warm_start", "smooth_every_candidate", "cone_gap",
                  "drop_redundant_friction", "pyramid_fallback"):
         for bad in ("yes", 1, 0.0):
             with pytest.raises(TypeError, match=name):

@@ -516,7 +516,7 @@ impl PyModel {
     }
 
     /// A new model with other options (any subset of the keywords).
-    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, pyramid_fallback=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, warm_start_widening_weight=None, regularization=None, friction_proximal=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
+    #[pyo3(signature = (*, timestep=None, gravity=None, rtol=None, kappa_tol=None, acceptable_rtol=None, acceptable_kappa_tol=None, max_iter=None, endgame_iter=None, acceptable_iter=None, stall_iter=None, cone_gap=None, drop_redundant_friction=None, pyramid_fallback=None, max_ls=None, undercut=None, warm_start=None, warm_start_margin=None, warm_start_widening=None, warm_start_widening_weight=None, regularization=None, friction_proximal=None, kappa_grad=None, activation_margin=None, nt_scaling=None, central_warm_start=None, smooth_every_candidate=None, max_subdivisions=None, energy_guard=None, max_step_rotation=None))]
     #[allow(clippy::too_many_arguments)]
     fn with_options(
         &self,
@@ -545,6 +545,7 @@ impl PyModel {
         activation_margin: Option<f64>,
         nt_scaling: Option<Bound<'_, PyAny>>,
         central_warm_start: Option<Bound<'_, PyAny>>,
+        smooth_every_candidate: Option<Bound<'_, PyAny>>,
         max_subdivisions: Option<i64>,
         energy_guard: Option<f64>,
         max_step_rotation: Option<f64>,
@@ -605,6 +606,11 @@ impl PyModel {
                 "central_warm_start",
                 central_warm_start,
                 o.central_warm_start,
+            )?;
+            o.smooth_every_candidate = flag(
+                "smooth_every_candidate",
+                smooth_every_candidate,
+                o.smooth_every_candidate,
             )?;
             o.max_subdivisions = count("max_subdivisions", max_subdivisions, o.max_subdivisions)?;
             o.energy_guard = energy_guard.unwrap_or(o.energy_guard);

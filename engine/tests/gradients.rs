@@ -13,7 +13,7 @@ use grad_check::{check, check_rollout_vjp, check_rollout_vjp_in, rel_err, tight}
 use proptest::prelude::*;
 use ukemi_engine::{
     ActuatorSpec, BodySpec, ContactModel, Coordinates, GeomSpec, JointKind, JointSpec,
-    Linearization, Model, ModelBuilder, Shape, State, Workspace, Wrt, step,
+    Linearization, Model, ModelBuilder, Shape, State, Workspace, Wrt, step, step_smoothed,
 };
 
 /// Double pendulum with springs, dampers and motors.
@@ -771,4 +771,52 @@ fn translations_against_a_tilted_plane_take_no_residual_evaluation() {
         coloured_vs_reference(&m, &s, &[], Coordinates::Minimal, Some(1e-4));
         check(&m, &s, &[], Coordinates::Minimal, Some(1e-4), 1e-5);
     }
+}
+
+/// A ball 5 cm above the floor, beyond the step's reach: the smoothed step leaves it out (it
+/// takes no part in the hard step either) and equals the hard step; with
+/// `smooth_every_candidate` the floor pushes it with `κ / gap` across the gap, `κ / (φ m)`
+/// upwards in its next velocity (φ the gap at the next pose), and its smoothed gradients still
+/// match finite differences of that smoothed step.
+#[test]
+fn far_candidates_take_part_in_the_smoothed_step_only_when_asked() {
+    let b = contact_scenes::floor(ModelBuilder::new().timestep(0.01), 0.5);
+    let (m_ball, r) = (0.5, 0.05);
+    let b = contact_scenes::free_body(
+        b,
+        "ball",
+        m_ball,
+        Shape::Sphere { radius: r },
+        [0.0, 0.0, r + 0.05],
+        [1.0, 0.0, 0.0, 0.0],
+        0.5,
+        ContactModel::Nonlinear,
+    );
+    let m = tight(b.compile().unwrap());
+    let s = State::reference(&m);
+    let kappa = 1e-4;
+    let mut hard = s.clone();
+    step(&m, &mut hard, &mut Workspace::new(&m), &[]).unwrap();
+    let mut smoothed = s.clone();
+    step_smoothed(&m, &mut smoothed, &[], kappa).unwrap();
+    assert_eq!(
+        smoothed.com_linvel, hard.com_linvel,
+        "the floor is out of reach"
+    );
+    let every = m
+        .with_options(ukemi_engine::Options {
+            smooth_every_candidate: true,
+            ..m.options.clone()
+        })
+        .unwrap();
+    let mut pushed = s.clone();
+    step_smoothed(&every, &mut pushed, &[], kappa).unwrap();
+    let gap = pushed.pose(1).pos.z - r;
+    let dv = pushed.velocity(1).0.z - hard.velocity(1).0.z;
+    let expect = kappa / (gap * m_ball);
+    assert!(
+        (dv - expect).abs() < 1e-3 * expect,
+        "pushed by {dv:e} m/s, κ / (φ m) = {expect:e}"
+    );
+    check(&every, &s, &[], Coordinates::Minimal, Some(kappa), 1e-5);
 }

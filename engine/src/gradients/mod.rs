@@ -14,8 +14,8 @@
 //!
 //! **κ-smoothing.** With `kappa_grad = Some(κ)` the gradient point is the *central-path point*
 //! at κ, the solution of `R(w; κ) = 0` with every complementarity pair of the candidates and
-//! limits the step activated held at `b ∘ c = κ e` (the others keep no impulse; see
-//! `solver::central::solve`):
+//! limits the step activated held at `b ∘ c = κ e` (the others keep no impulse; every one with
+//! `Options::smooth_every_candidate`; see `solver::central::solve`):
 //! after the hard solve (to `kappa_tol`), `solver::central::solve` moves every complementarity
 //! pair of the hard solution to product κ and runs Newton's method at κ from there (a few
 //! iterations); if that fails, it restarts the inequality variables at the neutral point and
@@ -471,12 +471,17 @@ impl SolveLinearization {
         let t0 = Instant::now();
         validate_inputs(model, &point.state, &ws, ctrl, &AppliedForces::default())?;
         let forces = AppliedForces::default();
-        // the stored solve fixed the contact activation (the central-path solve keeps it too):
-        // only the forces and the active candidates' geometry are read (`evaluate` prepares
-        // those), not a new solve's activation search over every candidate (a tenth of a
-        // Panda's reverse step)
-        ws.prepared.fill(false);
-        newton::prepare_smooth_forces(model, &point.state, &mut ws, ctrl, &forces);
+        if kappa_grad.is_some() && model.options.smooth_every_candidate {
+            // the central-path solve takes every candidate: prepare them all
+            newton::prepare(model, &point.state, &mut ws, ctrl, &forces);
+        } else {
+            // the stored solve fixed the contact activation (the central-path solve keeps it
+            // too): only the forces and the active candidates' geometry are read (`evaluate`
+            // prepares those), not a new solve's activation search over every candidate (a
+            // tenth of a Panda's reverse step)
+            ws.prepared.fill(false);
+            newton::prepare_smooth_forces(model, &point.state, &mut ws, ctrl, &forces);
+        }
         ws.w.copy_from_slice(&stored.w);
         ws.active.copy_from_slice(&stored.active);
         ws.saturated.copy_from_slice(&stored.saturated);

@@ -186,6 +186,14 @@ pub struct Options {
     /// solve fails). Default true; false starts from the neutral point directly (the former
     /// behaviour, kept for comparison).
     pub central_warm_start: bool,
+    /// Hold every contact candidate and limit of the model at `b ∘ c = κ` in the smoothed step
+    /// of `kappa_grad`, however far from touching (the relaxed problem of the Dojo paper, which
+    /// has no activation), instead of those the step activated. Default false. True gives
+    /// candidates out of reach a gradient (each pushes with `κ / gap`), which contact-implicit
+    /// planning may want, at a cost: on the shared robots a gradient at κ then took 6-27× the
+    /// exact one, and the Panda's smoothed velocities moved 2.6 rad/s at κ = 3e-4 (0.31 with
+    /// the activated candidates alone; `examples/benchmarks/smoothing_bias.py`).
+    pub smooth_every_candidate: bool,
     /// A step whose solve fails is taken again as 2, then 4, … up to this many equal
     /// sub-steps of `h / n` from the same state (each solved like a step; the control and
     /// applied forces held), and reported with [`crate::StepReport::subdivisions`]. 1 turns
@@ -246,6 +254,7 @@ impl Default for Options {
             kappa_grad: None,
             nt_scaling: true,
             central_warm_start: true,
+            smooth_every_candidate: false,
             max_subdivisions: 32,
             energy_guard: 0.05,
             max_step_rotation: 0.3,

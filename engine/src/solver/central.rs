@@ -56,7 +56,8 @@ const NEAR: f64 = 1e-6;
 
 /// Solve for the central-path point at `kappa` of the prepared, solved step in `ws` from
 /// `start`, over the contact candidates and limits the step's solve activated (those within
-/// reach of touching; the others keep no impulse, as in the hard step).
+/// reach of touching; the others keep no impulse, as in the hard step), or over every one
+/// with `Options::smooth_every_candidate`.
 ///
 /// Why not every candidate: each pair held at `b ∘ c = κ` pushes with `κ / gap` however far
 /// it is, and on the shared robots every candidate joining cost the gradient 6-27× the hard
@@ -73,6 +74,9 @@ pub(crate) fn solve(
     kappa: f64,
     start: Start,
 ) -> StepReport {
+    if model.options.smooth_every_candidate {
+        ws.active.fill(true);
+    }
     super::saturation::release_sliding(ws);
     super::saturation::release_separated(ws);
     match start {
