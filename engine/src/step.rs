@@ -323,15 +323,15 @@ fn attempts(
     )
 }
 
-/// The last resort of a step whose whole solve and every subdivision failed (`whole_converged`
-/// false; else no iterations at once): the whole step from `start` solved again with four times the
-/// iteration budget and every candidate active from the first attempt on, then, if that fails
-/// (or gains energy, [`gains_energy`]), tier by tier with every candidate active in the third
-/// tier (`Workspace::every_candidate`). Its next state and report (solution in `ws`, the
-/// iterations of both), else the iterations it spent (none when `whole_converged`). The humanoid with a lower arm wedged between its waist
-/// and the floor (`tests/hard_steps.rs`) failed every tier-by-tier attempt (~1350 iterations)
-/// and converges in ~20 with every candidate active from the start, as it does with
-/// `activation_margin = inf`; the shared Panda's step 782 under `step_bench` seed 1 (a
+/// The last resort of a step whose whole solve and every subdivision failed (with
+/// `whole_converged` it does nothing): the whole step from `start` solved again with four times
+/// the iteration budget and every candidate active from the first attempt on, then, if that
+/// fails (or gains energy, [`gains_energy`]), tier by tier with every candidate active in the
+/// third tier (`Workspace::every_candidate`). Its next state and report (solution in `ws`, the
+/// iterations of both), else the iterations it spent. The humanoid with a lower arm wedged
+/// between its waist and the floor (`tests/hard_steps.rs`) failed every tier-by-tier attempt
+/// (~1350 iterations) and converges in ~20 with every candidate active from the start, as it
+/// does with `activation_margin = inf`; the shared Panda's step 782 under `step_bench` seed 1 (a
 /// fingertip pad's corner pressed into the floor with ~330 N) spent 1400 iterations in the
 /// tiers (up to 686 candidates active) and converges in 46 all-active (844 → 195 ms for the
 /// step). The tiers stay as the second pass: when they came first, the Panda's step 135
@@ -914,6 +914,7 @@ mod tests {
         let s = State::reference(&lin);
         assert!(pyramid_step(&lin, &s, &[], &forces).unwrap().is_none());
     }
+
     /// A step that fails every attempt reports every iteration it spent, those of the long
     /// solve's failed passes included (they were left out: the shared Panda's seed-5 step 549
     /// reported 2015 iterations of the ~5100 it took).

@@ -1,9 +1,9 @@
 //! The central-path point at κ of a solved step: the interior solution of the relaxed problem
-//! (every complementarity pair the step activated at `b ∘ c = κ e`), the smoothed step of the gradients
-//! (`kappa_grad`). Started either from the step's hard solution moved onto the κ central path
-//! pair by pair and solved by Newton's method at κ ([`Start::Hard`], [`follow`]), or from the
-//! neutral interior point by the predictor-corrector of [`super::ipm`] with centring floored at
-//! κ ([`Start::Neutral`], the fallback).
+//! (every complementarity pair the step activated at `b ∘ c = κ e`), the smoothed step of the
+//! gradients (`kappa_grad`). Started either from the step's hard solution moved onto the κ
+//! central path pair by pair and solved by Newton's method at κ ([`Start::Hard`], [`follow`]),
+//! or from the neutral interior point by the predictor-corrector of [`super::ipm`] with
+//! centring floored at κ ([`Start::Neutral`], the fallback).
 //!
 //! NOTE: the hard solution itself is a poor start: its pairs sit at `b ∘ c ≈ κ_tol` on the
 //! cones' boundaries, where Newton's method hugs the boundary. Moving each pair to product κ
