@@ -558,6 +558,10 @@ pub struct Workspace {
     /// impulse, `s ≥ slack_floor · γ` (matrix only; 0 but while the gradients assemble their
     /// matrix at the gradient point, see `gradients::SLACK_FLOOR`).
     pub(crate) slack_floor: f64,
+    /// Whether κ weighs each contact candidate's pairs by its gap at the step's start
+    /// (`solver::taper`): set by the smoothed step's solve (`solver::central::solve`) for the
+    /// gradients at `kappa_grad`, cleared by every hard solve (`solver::ipm::solve_to`).
+    pub(crate) kappa_taper: bool,
     /// The left-out candidates' pairs modelled in the mean complementarity (none but in the
     /// third activation tier, see `FarPairs`).
     pub(crate) far: crate::solver::inequality::FarPairs,
@@ -720,6 +724,7 @@ impl Workspace {
         // (`nt` is read only while `nt_on`, and every solve clears it first)
         self.nt_on = false;
         self.nt_disabled = false;
+        self.kappa_taper = false;
         self.trace = None;
         self.trace_condition = false;
         self.attempt = 0;
@@ -912,6 +917,7 @@ impl Workspace {
             stalled_near: false,
             proximal: 0.0,
             slack_floor: 0.0,
+            kappa_taper: false,
             far: Default::default(),
             every_candidate: false,
             gentle_widening: false,

@@ -268,6 +268,14 @@ impl StepRows {
         }
         (&self.jac, &self.slip)
     }
+
+    /// The normal row of the impulse rows: the gap rate's gradient in the twists.
+    pub fn normal_row(&self) -> [f64; 12] {
+        match &self.source {
+            Some((w, a, b)) => ContactFrame::normal_row(w, a, b),
+            None => self.jac[0],
+        }
+    }
 }
 
 /// A candidate's feature held fixed for one step, chosen at the step's predicted poses

@@ -13,8 +13,11 @@
 //! a vector-Jacobian product one transposed back-substitution in all.
 //!
 //! **κ-smoothing.** With `kappa_grad = Some(κ)` the gradient point is the *central-path point*
-//! at κ, the solution of `R(w; κ) = 0` with every complementarity pair of the candidates and
-//! limits the step activated held at `b ∘ c = κ e` (the others keep no impulse; every one with
+//! at κ, the solution of `R(w; κ) = 0` with every complementarity pair of the limits the step
+//! activated held at `b ∘ c = κ e`, and of the contact candidates within reach at
+//! `b ∘ c = κ w e`, `w` a smooth taper of the gap and its rate at the step's start
+//! (`solver::taper`: 1 touching, at its floor before the activation's reach) whose slope the
+//! partials carry; the others keep no impulse (every one at `κ e` with
 //! `Options::smooth_every_candidate`; see `solver::central::solve`):
 //! after the hard solve (to `kappa_tol`), `solver::central::solve` moves every complementarity
 //! pair of the hard solution to product κ and runs Newton's method at κ from there (a few
@@ -567,7 +570,16 @@ impl SolveLinearization {
         let w = ws.w.clone();
         let t0 = Instant::now();
         let held = (&ws.active[..], &active_frozen(&ws)[..]);
-        let parts = partials::partials(model, &point, ctrl, &w, held, &inputs, method)?;
+        let taper = (ws.kappa_taper && kappa > 0.0).then(|| partials::Taper {
+            kappa,
+            phi_now: &ws.contact_phi_now,
+            rate_now: &ws.contact_rate_now,
+            saturated: &ws.saturated,
+            rate_rows: (0..model.ncontact())
+                .map(|c| ws.active[c].then(|| ws.contact_step[c].normal_row()))
+                .collect(),
+        });
+        let parts = partials::partials(model, &point, ctrl, &w, held, &inputs, method, taper)?;
         times.partials = t0.elapsed().as_secs_f64();
         Ok(SolveLinearization {
             coords,

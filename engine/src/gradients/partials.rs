@@ -19,12 +19,14 @@ use super::light::{Light, light_column};
 use super::plan::{OutputPlan, Plan, Refresh, plan_for, state_bodies, subtrees};
 use super::tangent::{Coordinates, Point};
 use super::{FD_STEP, next_state_into};
-use crate::contact::Frozen;
+use crate::contact::{ContactModel, Frozen};
 use crate::model::Model;
 use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
 use crate::solver::activation::prepare_candidates_holding;
 use crate::solver::newton;
+use crate::solver::saturation::Hold;
+use crate::solver::taper::weight_and_slopes;
 use crate::state::{Recycled, State, Workspace};
 use crate::step::AppliedForces;
 
@@ -175,12 +177,23 @@ struct Probe<'a> {
     /// The feature each active contact candidate held at the gradient point: perturbed states
     /// keep it (the residual map is the solve's, with its features).
     frozen: Vec<Option<Frozen>>,
+    /// κ of the residual: the smoothed step's with κ weighted by each candidate's gap at the
+    /// step's start (`solver::taper`), whose change with the inputs is then in the
+    /// differences; 0 otherwise (a constant κ cancels in them).
+    kappa: f64,
 }
 
 impl<'a> Probe<'a> {
-    fn new(model: &'a Model, point: &'a Point, ctrl: &'a [f64], held: Held) -> Probe<'a> {
+    fn new(
+        model: &'a Model,
+        point: &'a Point,
+        ctrl: &'a [f64],
+        held: Held,
+        tapered: Option<f64>,
+    ) -> Probe<'a> {
         let (active, held_frozen) = held;
         let mut ws = Recycled::new(Workspace::pooled_scratch(model));
+        ws.kappa_taper = tapered.is_some();
         // the residual map is linearised with the solve's contact activation frozen
         ws.active.copy_from_slice(active);
         let mut frozen = vec![None; model.contacts.len()];
@@ -197,6 +210,7 @@ impl<'a> Probe<'a> {
         let base_joints = BaseJoints::of(&ws);
         Probe {
             frozen,
+            kappa: tapered.unwrap_or(0.0),
             base_joints,
             base: model,
             point,
@@ -268,7 +282,15 @@ impl<'a> Probe<'a> {
             .map(|c| (c, self.frozen[c]));
         prepare_candidates_holding(model, &self.state, &mut self.ws, candidates);
         self.ws.active = active;
-        newton::evaluate_in(model, &self.state, &mut self.ws, w, &mut self.residual, 0.0);
+        let kappa = self.kappa;
+        newton::evaluate_in(
+            model,
+            &self.state,
+            &mut self.ws,
+            w,
+            &mut self.residual,
+            kappa,
+        );
     }
 
     /// Residual at `w` with only the contact candidates `contacts` (of those `active`)
@@ -297,7 +319,14 @@ impl<'a> Probe<'a> {
         }
         let candidates = moved.map(|&c| (c, self.frozen[c]));
         prepare_candidates_holding(model, state, &mut self.ws, candidates);
-        newton::evaluate_in(model, state, &mut self.ws, w, &mut self.residual, 0.0);
+        newton::evaluate_in(
+            model,
+            state,
+            &mut self.ws,
+            w,
+            &mut self.residual,
+            self.kappa,
+        );
     }
 
     /// Output tangent (relative to `out_base`) of the next state from `w` with the probe's inputs.
@@ -325,6 +354,9 @@ fn steps(model: &Model, inputs: &[Input]) -> Vec<f64> {
 
 /// Compute the partials at `w` (the gradient point of `point` with controls `ctrl`; contact
 /// activation `active`); the output tangent is taken relative to the next state at `w`.
+/// `taper`: the smoothed step's κ weights, when each candidate's gap weighs its κ
+/// (`solver::taper`).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn partials(
     model: &Model,
     point: &Point,
@@ -333,13 +365,14 @@ pub(super) fn partials(
     held: Held,
     inputs: &[Input],
     method: PartialsMethod,
+    taper: Option<Taper>,
 ) -> crate::Result<Partials> {
     let (nw, ny, nz) = (w.len(), point.coords.dim(model), inputs.len());
     let eps = steps(model, inputs);
-    let mut probe = Probe::new(model, point, ctrl, held);
+    let mut probe = Probe::new(model, point, ctrl, held, taper.as_ref().map(|t| t.kappa));
     let nwc = 6 * (model.nbody() - 1);
     let plan = match method {
-        PartialsMethod::Coloured => plan_for(model, point.coords, held.0, inputs),
+        PartialsMethod::Coloured => plan_for(model, point.coords, held.0, inputs, taper.is_some()),
         PartialsMethod::ColumnByColumn => {
             Arc::new(Plan::column_by_column(model, point.coords, inputs, nw))
         }
@@ -367,8 +400,16 @@ pub(super) fn partials(
     out_base.coords = point.coords;
     let refresh = plan.refresh.as_deref();
     residual_columns(&mut probe, &mut out, inputs, &eps, w, &plan.groups, refresh);
-    light_columns(&mut probe, &mut out, inputs, &eps, &plan.light_groups);
-    plane_columns(&mut out, &plan.plane_columns);
+    let pairs = (&plan.light_pairs[..], taper.as_ref());
+    light_columns(
+        &mut probe,
+        &mut out,
+        inputs,
+        &eps,
+        &plan.light_groups,
+        pairs,
+    );
+    plane_columns(model, &mut out, &plan.plane_columns, taper.as_ref());
     output_partials(
         &mut probe,
         &mut out,
@@ -435,6 +476,7 @@ fn light_columns(
     inputs: &[Input],
     eps: &[f64],
     groups: &[Vec<usize>],
+    (pairs, taper): (&[Vec<usize>], Option<&Taper>),
 ) {
     let (model, point) = (probe.base, probe.point);
     // the free Jacobians and coordinates of the gradient point (a residual evaluation leaves
@@ -492,14 +534,32 @@ fn light_columns(
                 eps[c],
                 &mut dr,
             );
-            // scatter the body rows onto the column's support
+            // scatter the body rows onto the column's support; the candidates' rows follow
             let mut k = out.r_start[c];
-            for &(s, l) in &out.rows[c] {
+            let body_rows = out.rows[c].len()
+                - (pairs[c].iter())
+                    .map(|&j| super::plan::pair_rows(model, j).len())
+                    .sum::<usize>();
+            for &(s, l) in &out.rows[c][..body_rows] {
                 for r in s..s + l {
                     out.r_z[k] = body_row(&dr, r);
                     k += 1;
                 }
             }
+            if let (Some(t), Light::Twists(dt)) = (taper, input) {
+                for &j in &pairs[c] {
+                    let drate = t.rate_rows[j].map_or(0.0, |row| {
+                        let contact = &model.contacts[j];
+                        let [a, b] = [contact.geom_a, contact.geom_b].map(|g| model.geoms[g].body);
+                        let twist = |b: usize| if b == 0 { [0.0; 6] } else { dt[b] };
+                        let (ta, tb) = (twist(a), twist(b));
+                        (0..6).map(|i| row[i] * ta[i] + row[6 + i] * tb[i]).sum()
+                    });
+                    let shift = t.shift(model, j, 0.0, drate);
+                    k += t.write_pairs(model, j, shift, &mut out.r_z[k..]);
+                }
+            }
+            debug_assert_eq!(k, out.r_start[c + 1]);
         }
         if !states.is_empty() {
             probe.restore(inputs, &states);
@@ -507,12 +567,61 @@ fn light_columns(
     }
 }
 
-/// `∂R/∂z` of the translation columns whose tree meets the rest only at world planes: their
-/// entries are the plan's (`plan::plane_entries`).
-fn plane_columns(out: &mut Partials, columns: &[(usize, Vec<f64>)]) {
+/// The smoothed step's κ weights at the gradient point (`solver::taper`).
+pub(super) struct Taper<'t> {
+    pub kappa: f64,
+    /// Each candidate's gap and its rate at the step's start.
+    pub phi_now: &'t [f64],
+    pub rate_now: &'t [f64],
+    /// The friction cones held saturated (their first row is an equality).
+    pub saturated: &'t [Option<Hold>],
+    /// Each active candidate's gap rate as a row in the twists `(v, ω_body)` of its bodies a
+    /// (0..6) and b (6..12): `ContactFrame`'s normal row at the step's start.
+    pub rate_rows: Vec<Option<[f64; 12]>>,
+}
+
+impl Taper<'_> {
+    /// `-κ ∂w/∂z` of candidate `k` for a change `dphi` of its gap and `drate` of its rate.
+    fn shift(&self, model: &Model, k: usize, dphi: f64, drate: f64) -> f64 {
+        let [_, by_gap, by_rate] = weight_and_slopes(model, k, self.phi_now[k], self.rate_now[k]);
+        -self.kappa * (by_gap * dphi + by_rate * drate)
+    }
+
+    /// Write `shift` on candidate `k`'s complementarity rows (`plan::pair_rows`) from `out[0]`;
+    /// returns how many rows.
+    fn write_pairs(&self, model: &Model, k: usize, shift: f64, out: &mut [f64]) -> usize {
+        let rows: &[f64] = match model.contacts[k].model {
+            ContactModel::Impact => &[shift],
+            ContactModel::Nonlinear if self.saturated[k].is_some() => &[shift, 0.0],
+            ContactModel::Nonlinear => &[shift, shift],
+            ContactModel::Linear => &[shift; 6],
+        };
+        out[..rows.len()].copy_from_slice(rows);
+        rows.len()
+    }
+}
+
+/// `∂R/∂z` of the translation columns whose tree meets the rest only at world planes: the
+/// plan's gap entries (`plan::plane_entries`) and, with `taper`, the complementarity rows'
+/// `-κ ∂w/∂z`, the gap at the start moving as the gap row does (`∂φ/∂z = -(gap entry)`; a
+/// translation leaves the rate to a plane as it is).
+fn plane_columns(
+    model: &Model,
+    out: &mut Partials,
+    columns: &[(usize, Vec<(usize, f64)>)],
+    taper: Option<&Taper>,
+) {
     for (c, entries) in columns {
-        let start = out.r_start[*c];
-        out.r_z[start..start + entries.len()].copy_from_slice(entries);
+        let mut k = out.r_start[*c];
+        for &(contact, gap) in entries {
+            out.r_z[k] = gap;
+            k += 1;
+            if let Some(t) = taper {
+                let shift = t.shift(model, contact, -gap, 0.0);
+                k += t.write_pairs(model, contact, shift, &mut out.r_z[k..]);
+            }
+        }
+        debug_assert_eq!(k, out.r_start[*c + 1]);
     }
 }
 
@@ -683,7 +792,7 @@ mod tests {
         let w = ws.w.clone();
         let point = Point::new(&m, &s, Coordinates::Minimal).unwrap();
         let active = vec![false; ws.active.len()];
-        let mut probe = Probe::new(&m, &point, &[], (&active, &[]));
+        let mut probe = Probe::new(&m, &point, &[], (&active, &[]), None);
         let inputs: Vec<Input> = (0..2 * m.nv).map(Input::State).collect();
         let eps = steps(&m, &inputs);
         let mut residual = |i: usize, sign: f64| {

@@ -9,10 +9,12 @@ use std::sync::Arc;
 use super::partials::Input;
 use super::sparsity::{Interactions, Support, colour, neighbours, transmission_bodies};
 use super::tangent::Coordinates;
+use crate::contact::ContactModel;
 use crate::contact::geometry::Shape;
 use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
 use crate::model::{Model, Transmission};
+use crate::solver::inequality::SOC;
 
 /// Where each column's entries start in `Partials::r_z` for the supports `rows`, and the
 /// total as the last entry.
@@ -148,9 +150,47 @@ fn plane_entries(model: &Model, input: Input, contacts: &[usize]) -> Option<Vec<
         .collect()
 }
 
+/// The rows of candidate `k` that a translation against a world plane changes: its gap row
+/// (its node's first) and, with `tapered` (κ weighted by the gap at the step's start,
+/// `solver::taper`), its complementarity rows ([`pair_rows`]).
+pub(super) fn plane_rows(model: &Model, k: usize, tapered: bool) -> Vec<(usize, usize)> {
+    let o = model
+        .topology
+        .pattern
+        .offset(model.topology.contact_node[k]);
+    let mut rows = vec![(o, 1)];
+    if tapered {
+        rows.extend(pair_rows(model, k));
+    }
+    rows
+}
+
+/// The complementarity rows of candidate `k` whose κ shift its weight scales
+/// (`solver::taper`): `(γ s)` and the friction cone's first row, or the pyramid's six orthant
+/// rows (a held cone's first row is an equality: its entry is then 0).
+pub(super) fn pair_rows(model: &Model, k: usize) -> Vec<(usize, usize)> {
+    let o = model
+        .topology
+        .pattern
+        .offset(model.topology.contact_node[k]);
+    match model.contacts[k].model {
+        ContactModel::Impact => vec![(o + 1, 1)],
+        ContactModel::Nonlinear => vec![(o + 1, 1), (o + SOC.2, 1)],
+        ContactModel::Linear => vec![(o + 6, 6)],
+    }
+}
+
 /// Row supports of the columns that are not light at the activation `active` (a light
 /// column's rows come from the skeleton; its entry here is empty).
-fn supports(model: &Model, graph: &Interactions, inputs: &[Input], sk: &Skeleton) -> Vec<Support> {
+/// `tapered`: the activation when κ is weighted per candidate (`solver::taper`), whose taper
+/// distance reads gravity.
+fn supports(
+    model: &Model,
+    graph: &Interactions,
+    inputs: &[Input],
+    sk: &Skeleton,
+    tapered: Option<&[bool]>,
+) -> Vec<Support> {
     let all: Vec<usize> = (1..model.nbody()).collect();
     let mut sup: Vec<Support> = Vec::with_capacity(inputs.len());
     for (c, input) in inputs.iter().enumerate() {
@@ -180,7 +220,23 @@ fn supports(model: &Model, graph: &Interactions, inputs: &[Input], sk: &Skeleton
                     let bodies = [joint.parent, joint.child];
                     Support::new(model, graph, &bodies, &[], &[], &bodies)
                 }
-                Param::Gravity(_) => Support::new(model, graph, &all, &[], &[], &[]),
+                Param::Gravity(_) => {
+                    let mut s = Support::new(model, graph, &all, &[], &[], &[]);
+                    if let Some(active) = tapered {
+                        let t = &model.topology;
+                        // (evaluated with their rows: a restricted evaluation leaves out the
+                        // others' rows)
+                        let weighted = (0..model.ncontact()).filter(|&k| active[k]);
+                        s.contacts.extend(weighted);
+                        s.contacts.sort_unstable();
+                        s.contacts.dedup();
+                        s.nodes
+                            .extend(s.contacts.iter().map(|&k| t.contact_node[k]));
+                        s.nodes.sort_unstable();
+                        s.nodes.dedup();
+                    }
+                    s
+                }
                 Param::Timestep => Support::everything(model),
             },
         };
@@ -335,18 +391,28 @@ pub(super) struct Plan {
     pub(super) refresh: Option<Vec<Refresh>>,
     /// The light columns' groups (closed form, [`light_columns`]); empty column by column.
     pub(super) light_groups: Vec<Vec<usize>>,
-    /// Translation columns whose tree meets the rest only at world planes, with their entries
-    /// on `rows` (one per candidate, its gap's row): closed form, no evaluation
-    /// ([`plane_entries`]).
-    pub(super) plane_columns: Vec<(usize, Vec<f64>)>,
+    /// Per light column, the active candidates whose complementarity rows ([`pair_rows`])
+    /// follow its body rows: those on the bodies whose twists it changes, when κ is weighted
+    /// by the gap rates at the start (`solver::taper`); empty otherwise.
+    pub(super) light_pairs: Vec<Vec<usize>>,
+    /// Translation columns whose tree meets the rest only at world planes, with each boundary
+    /// candidate and its gap row's entry: closed form, no evaluation ([`plane_entries`]). Their
+    /// rows are [`plane_rows`]'s.
+    pub(super) plane_columns: Vec<(usize, Vec<(usize, f64)>)>,
     pub(super) output: Arc<OutputPlan>,
 }
 
 impl Plan {
     /// Coloured: supports from the interaction graph of the activation `active`.
-    fn coloured(model: &Model, active: &[bool], inputs: &[Input], sk: &Skeleton) -> Plan {
+    fn coloured(
+        model: &Model,
+        active: &[bool],
+        inputs: &[Input],
+        sk: &Skeleton,
+        tapered: bool,
+    ) -> Plan {
         let graph = Interactions::new(model, &sk.neighbours, active);
-        let sup = supports(model, &graph, inputs, sk);
+        let sup = supports(model, &graph, inputs, sk, tapered.then_some(active));
         // a rigid translation against world planes only moves their gaps, by n·d: the gap
         // rows of those candidates are its whole column
         let plane: Vec<Option<(Vec<usize>, Vec<f64>)>> = (0..inputs.len())
@@ -357,16 +423,33 @@ impl Plan {
                 Some((boundary, entries))
             })
             .collect();
-        let p = &model.topology.pattern;
+        // with κ weighted by the gaps' rates at the start, a change of the current twists
+        // moves the weights of the active candidates on the bodies it touches
+        let light_pairs: Vec<Vec<usize>> = (0..inputs.len())
+            .map(|c| match inputs[c] {
+                Input::State(_) if tapered && sk.light[c] => {
+                    let touched = &sk.bodies[c].0;
+                    let on = |g: usize| touched.contains(&model.geoms[g].body);
+                    (0..model.ncontact())
+                        .filter(|&k| active[k])
+                        .filter(|&k| on(model.contacts[k].geom_a) || on(model.contacts[k].geom_b))
+                        .collect()
+                }
+                _ => Vec::new(),
+            })
+            .collect();
         let rows: Vec<Vec<(usize, usize)>> = sup
             .iter()
             .zip(&sk.light_rows)
             .enumerate()
             .map(|(c, (s, light))| match (sk.light[c], &plane[c]) {
-                (true, _) => light.clone(),
+                (true, _) => {
+                    let pairs = light_pairs[c].iter().flat_map(|&k| pair_rows(model, k));
+                    light.iter().copied().chain(pairs).collect()
+                }
                 (false, Some((ks, _))) => ks
                     .iter()
-                    .map(|&k| (p.offset(model.topology.contact_node[k]), 1))
+                    .flat_map(|&k| plane_rows(model, k, tapered))
                     .collect(),
                 (false, None) => node_rows(model, &s.nodes),
             })
@@ -374,7 +457,10 @@ impl Plan {
         // full columns by coloured residual evaluations, light and plane ones in closed form
         let groups = coloured_columns(&sup, |c| !sk.light[c] && plane[c].is_none(), model);
         let plane_columns = (plane.into_iter().enumerate())
-            .filter_map(|(c, p)| Some((c, p?.1)))
+            .filter_map(|(c, p)| {
+                let (ks, entries) = p?;
+                Some((c, ks.into_iter().zip(entries).collect()))
+            })
             .collect();
         // contacts and joints each group must refresh
         let refresh: Vec<Refresh> = groups
@@ -416,6 +502,7 @@ impl Plan {
             groups,
             refresh: Some(refresh),
             light_groups: sk.light_groups.clone(),
+            light_pairs,
             plane_columns,
             output: sk.output.clone(),
         }
@@ -435,6 +522,7 @@ impl Plan {
             groups: (0..inputs.len()).map(|c| vec![c]).collect(),
             refresh: None,
             light_groups: Vec::new(),
+            light_pairs: vec![Vec::new(); inputs.len()],
             plane_columns: Vec::new(),
             output: Arc::new(OutputPlan::new(model, coords, inputs, None, &[])),
         }
@@ -445,7 +533,7 @@ impl Plan {
 const KEPT_PLANS: usize = 8;
 
 /// A kept [`Plan`], with its skeleton's key and the activation it was built for.
-type KeptPlan = (SkeletonKey, Vec<bool>, Arc<Plan>);
+type KeptPlan = (SkeletonKey, Vec<bool>, bool, Arc<Plan>);
 
 /// What a [`Skeleton`] is built from.
 #[derive(PartialEq)]
@@ -469,12 +557,15 @@ fn to_front<T>(kept: &mut [T], i: usize) {
 
 /// The coloured [`Plan`] for these inputs at the activation `active`: a kept one (the Panda
 /// repeats its activation over most steps), or one built on the kept [`Skeleton`] (the
-/// humanoid's and the A1's change nearly every step).
+/// humanoid's and the A1's change nearly every step). `tapered`: whether κ's weights move
+/// with the gaps (`solver::taper`), so that a translation against world planes also changes
+/// the complementarity rows ([`plane_rows`]).
 pub(super) fn plan_for(
     model: &Model,
     coords: Coordinates,
     active: &[bool],
     inputs: &[Input],
+    tapered: bool,
 ) -> Arc<Plan> {
     let key = SkeletonKey {
         topology: model.topology_id(),
@@ -484,9 +575,11 @@ pub(super) fn plan_for(
     let kept = PLANS
         .try_with(|p| {
             let mut p = p.try_borrow_mut().ok()?;
-            let i = p.iter().position(|(k, a, _)| *k == key && a == active)?;
+            let i = p
+                .iter()
+                .position(|(k, a, t, _)| *k == key && a == active && *t == tapered)?;
             to_front(&mut p, i);
-            Some(p[0].2.clone())
+            Some(p[0].3.clone())
         })
         .ok()
         .flatten();
@@ -516,11 +609,11 @@ pub(super) fn plan_for(
         });
         sk
     });
-    let plan = Arc::new(Plan::coloured(model, active, inputs, &sk));
+    let plan = Arc::new(Plan::coloured(model, active, inputs, &sk, tapered));
     let _ = PLANS.try_with(|p| {
         if let Ok(mut p) = p.try_borrow_mut() {
             p.truncate(KEPT_PLANS - 1);
-            p.insert(0, (key, active.to_vec(), plan.clone()));
+            p.insert(0, (key, active.to_vec(), tapered, plan.clone()));
         }
     });
     plan

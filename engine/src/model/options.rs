@@ -188,7 +188,8 @@ pub struct Options {
     pub central_warm_start: bool,
     /// Hold every contact candidate and limit of the model at `b ∘ c = κ` in the smoothed step
     /// of `kappa_grad`, however far from touching (the relaxed problem of the Dojo paper, which
-    /// has no activation), instead of those the step activated. Default false. True gives
+    /// has no activation), instead of the candidates within reach at a κ tapered with their
+    /// distance (`solver::taper`) and the limits the step activated. Default false. True gives
     /// candidates out of reach a gradient (each pushes with `κ / gap`), which contact-implicit
     /// planning may want, at a cost: on the shared robots a gradient at κ then took 6-27× the
     /// exact one, and the Panda's smoothed velocities moved 2.6 rad/s at κ = 3e-4 (0.31 with

@@ -1,5 +1,6 @@
 //! The central-path point at κ of a solved step: the interior solution of the relaxed problem
-//! (every complementarity pair the step activated at `b ∘ c = κ e`), the smoothed step of the
+//! (each complementarity pair the step activated at `b ∘ c = κ e`, a contact candidate's at
+//! `κ w e` with its taper weight `w`, [`super::taper`]), the smoothed step of the
 //! gradients (`kappa_grad`). Started either from the step's hard solution moved onto the κ
 //! central path pair by pair and solved by Newton's method at κ ([`Start::Hard`], [`follow`]),
 //! or from the neutral interior point by the predictor-corrector of [`super::ipm`] with
@@ -56,8 +57,9 @@ const NEAR: f64 = 1e-6;
 
 /// Solve for the central-path point at `kappa` of the prepared, solved step in `ws` from
 /// `start`, over the contact candidates and limits the step's solve activated (those within
-/// reach of touching; the others keep no impulse, as in the hard step), or over every one
-/// with `Options::smooth_every_candidate`.
+/// reach of touching; the others keep no impulse, as in the hard step) and the candidates whose
+/// taper weight is above its floor ([`join_weighted`]), each candidate's κ weighted by
+/// [`super::taper`]; or over every one at κ with `Options::smooth_every_candidate`.
 ///
 /// Why not every candidate: each pair held at `b ∘ c = κ` pushes with `κ / gap` however far
 /// it is, and on the shared robots every candidate joining cost the gradient 6-27× the hard
@@ -65,8 +67,9 @@ const NEAR: f64 = 1e-6;
 /// back-substitution). The Panda's fingertip pads, 400 corner candidates ~1 cm apart, moved its
 /// smoothed velocities 2.6 rad/s off the simulated ones at κ = 3e-4, 0.31 with the activated
 /// ones alone; the humanoid's and the A1's come from their activated candidates (0.99 and 2.0
-/// either way). The smoothed map then changes where a candidate comes within reach, by its
-/// `κ / gap` at the reach (~1 cm): 0.03 N·s at κ = 3e-4, 1e-4 N·s at 1e-6.
+/// either way). With κ alike on every activated candidate, the smoothed map then changed where
+/// a candidate came within reach, by its `κ / gap` there (~1 cm): 0.03 N·s at κ = 3e-4; the
+/// taper of κ with the distance ([`super::taper`]) makes it continuous.
 pub(crate) fn solve(
     model: &Model,
     state: &State,
@@ -74,8 +77,13 @@ pub(crate) fn solve(
     kappa: f64,
     start: Start,
 ) -> StepReport {
-    if model.options.smooth_every_candidate {
+    let every = model.options.smooth_every_candidate;
+    if every {
         ws.active.fill(true);
+    }
+    ws.kappa_taper = !every;
+    if ws.kappa_taper {
+        join_weighted(model, ws);
     }
     super::saturation::release_sliding(ws);
     super::saturation::release_separated(ws);
@@ -89,6 +97,24 @@ pub(crate) fn solve(
         Start::Neutral => {
             super::inequality::initialize(model, state, ws, false);
             ipm::solve_to(model, state, ws, Some(kappa))
+        }
+    }
+}
+
+/// Activate every prepared candidate whose κ weight is above the floor ([`super::taper`]): those
+/// within reach that the hard step's activation left out as above their corner group's lowest
+/// ([`super::activation::activate`]). Their weight then rises from the floor inside the step,
+/// not at the corner rule's boundary. An unprepared candidate is farther than its reach.
+fn join_weighted(model: &Model, ws: &mut Workspace) {
+    for c in 0..model.ncontact() {
+        if !ws.active[c] && ws.prepared[c] {
+            let w = super::taper::weight_and_slopes(
+                model,
+                c,
+                ws.contact_phi_now[c],
+                ws.contact_rate_now[c],
+            )[0];
+            ws.active[c] = w > super::taper::WEIGHT_FLOOR;
         }
     }
 }
@@ -221,10 +247,17 @@ pub(crate) fn centre_some(
     // rows `s - φ`, `η₂:₃ - v_t`, ... at the hard velocities (independent of κ)
     evaluate(model, state, ws, false, 0.0);
     let t = &model.topology;
+    let taper = ws.kappa_taper;
     for (c, contact) in model.contacts.iter().enumerate() {
         if !contact_selected(c) {
             continue;
         }
+        // (an inactive candidate's gap at the start may be a bound, `activation::prepare`)
+        let start = (taper && ws.active[c]).then_some(super::taper::AtStart {
+            phi: &ws.contact_phi_now,
+            rate: &ws.contact_rate_now,
+        });
+        let kappa = kappa * super::taper::weight(model, start, Some(c));
         let o = t.pattern.offset(t.contact_node[c]);
         let dim = contact.model.dim();
         let (x, r) = (&mut ws.w[o..o + dim], &ws.residual[o..o + dim]);

@@ -403,7 +403,25 @@ pub(crate) fn evaluate(
         }
     }
     super::tendon::add_rows(model, ws, w, residual);
-    violations(model, &ws.active, &ws.saturated, w, residual, kappa)
+    let start = ws.kappa_taper.then_some(super::taper::AtStart {
+        phi: &ws.contact_phi_now,
+        rate: &ws.contact_rate_now,
+    });
+    let shifts = Shifts {
+        kappa,
+        start,
+        joint_filter: &ws.joint_filter,
+    };
+    violations(model, &ws.active, &ws.saturated, w, residual, shifts)
+}
+
+/// What [`violations`] subtracts from the complementarity rows: κ, weighted by
+/// [`super::taper`] with the gaps and rates at the step's start `start` when given, on the rows this
+/// evaluation wrote (a joint left out by `joint_filter` keeps its limit rows as they were).
+struct Shifts<'a> {
+    kappa: f64,
+    start: Option<super::taper::AtStart<'a>>,
+    joint_filter: &'a [bool],
 }
 
 /// The velocities `(v, ω_body)` of contact `c`'s two bodies in the iterate `w` (the next
@@ -495,15 +513,15 @@ fn contact_rows(
     }
 }
 
-/// Subtract κ from the complementarity rows' identity components; return (equality ∞-norm of the
-/// inequality nodes, max |b ∘ c| / max(1, |b|) before the shift).
+/// Subtract κ ([`Shifts`]) from the complementarity rows' identity components; return
+/// (equality ∞-norm of the inequality nodes, max |b ∘ c| / max(1, |b|) before the shift).
 fn violations(
     model: &Model,
     active: &[bool],
     saturated: &[Option<Hold>],
     w: &[f64],
     residual: &mut [f64],
-    kappa: f64,
+    shifts: Shifts,
 ) -> (f64, f64) {
     let t = &model.topology;
     // complementarity violation per pair, relative to the primal (impulse) variable once it
@@ -511,7 +529,7 @@ fn violations(
     // for the same hovering distance s, and round-off limits s, not γ s
     let mut kvio: f64 = 0.0;
     let cone_gap = model.options.cone_gap;
-    let mut is_comp = |o: usize, p: usize, row: usize, soc: bool, residual: &mut [f64]| {
+    let mut is_comp = |o: usize, p: usize, row: usize, soc: bool, k: f64, residual: &mut [f64]| {
         let n = if soc && !cone_gap { 3 } else { 1 };
         let scale = w[o + p].abs().max(1.0);
         for i in 0..n {
@@ -522,10 +540,19 @@ fn violations(
                 kvio.max(v.abs())
             };
         }
-        residual[o + row] -= kappa;
+        residual[o + row] -= k;
     };
-    for_each_pair_except(model, active, saturated, |o, p, _, row, soc| {
-        is_comp(o, p, row, soc, residual)
+    let nc = model.ncontact();
+    let written = |owner: Option<usize>| match owner {
+        Some(i) if i >= nc => shifts.joint_filter.get(i - nc).is_none_or(|&on| on),
+        _ => true,
+    };
+    for_each_owned_pair(model, active, saturated, |owner, o, p, _, row, soc| {
+        let k = match written(owner) {
+            true => shifts.kappa * super::taper::weight(model, shifts.start, owner),
+            false => 0.0,
+        };
+        is_comp(o, p, row, soc, k, residual)
     });
     // equality rows = all node rows that are not complementarity rows
     let mut rvio: f64 = 0.0;
@@ -944,7 +971,11 @@ pub(crate) fn scale_soc_rows(model: &Model, ws: &mut Workspace, trial: bool, kap
         let o = t.pattern.offset(t.contact_node[c]);
         let (xi, eta) = (nt.w * v3(w, o + SOC.0), nt.w_inv * v3(w, o + SOC.1));
         let r = soc_product(&xi, &eta);
-        ws.residual[o + SOC.2] = r[0] - kappa;
+        let start = ws.kappa_taper.then_some(super::taper::AtStart {
+            phi: &ws.contact_phi_now,
+            rate: &ws.contact_rate_now,
+        });
+        ws.residual[o + SOC.2] = r[0] - kappa * super::taper::weight(model, start, Some(c));
         ws.residual[o + SOC.2 + 1] = r[1];
         ws.residual[o + SOC.2 + 2] = r[2];
     }

@@ -147,6 +147,9 @@ pub(crate) fn solve_to(
     let o = &model.options;
     let p = &model.topology.pattern;
     let floor = central.unwrap_or(o.kappa_tol / o.undercut);
+    if central.is_none() {
+        ws.kappa_taper = false;
+    }
     ws.nt.fill(None);
     ws.widened = false;
     // friction of candidates apart, held at zero while they stay apart (hard solves only: the

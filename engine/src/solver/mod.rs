@@ -11,6 +11,7 @@ pub(crate) mod inequality;
 pub(crate) mod ipm;
 pub(crate) mod newton;
 pub(crate) mod saturation;
+pub(crate) mod taper;
 pub(crate) mod tendon;
 #[cfg(test)]
 pub(crate) mod test_rng;

@@ -409,11 +409,17 @@ pub(crate) fn for_each_live_range(
 fn shift_complementarity(model: &Model, ws: &mut Workspace, kappa: f64) {
     if kappa != 0.0 {
         let r = &mut ws.residual;
-        super::inequality::for_each_pair_except(
+        let start = ws.kappa_taper.then_some(super::taper::AtStart {
+            phi: &ws.contact_phi_now,
+            rate: &ws.contact_rate_now,
+        });
+        super::inequality::for_each_owned_pair(
             model,
             &ws.active,
             &ws.saturated,
-            |o, _, _, row, _| r[o + row] -= kappa,
+            |owner, o, _, _, row, _| {
+                r[o + row] -= kappa * super::taper::weight(model, start, owner)
+            },
         );
     }
 }
