@@ -524,6 +524,9 @@ pub struct Workspace {
     /// Per limited dof (`limit_adr`), then per tendon limit: its slacks `(q - lo, hi - q)` at
     /// the step's start, what an inactive limit keeps in its slack variables.
     pub(crate) limit_slack_now: Vec<[f64; 2]>,
+    /// Per limited dof, then per tendon limit: the rate of its coordinate at the step's start,
+    /// `q̇` (what the κ taper of the smoothed step reads, `solver::taper`).
+    pub(crate) limit_rate_now: Vec<f64>,
     /// Per candidate: how its friction cone is held out of the interior-point iteration — on
     /// the cone's boundary after the solve, or at zero for a pair that cannot slip (see
     /// `solver::saturation::Hold`); `None` for complementarity rows.
@@ -882,6 +885,7 @@ impl Workspace {
             jacobian_rhs: Vec::new(),
             active: vec![true; model.ncontact() + model.njoint() + model.tendon_limits.len()],
             limit_slack_now: vec![[1.0; 2]; nlim + model.tendon_limits.len()],
+            limit_rate_now: vec![0.0; nlim + model.tendon_limits.len()],
             saturated: vec![None; model.ncontact()],
             saturated_acceptable: vec![None; model.ncontact()],
             blocking: vec![false; model.ncontact() + model.joints.len()],

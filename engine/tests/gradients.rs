@@ -1013,4 +1013,133 @@ fn the_smoothed_step_is_continuous_where_the_corner_rule_leaves_a_corner_out() {
     // and the gradients there hold the left-out corners too
     let (m_b, s_b) = boxed(boundary + 1e-6);
     check(&m_b, &s_b, &[], Coordinates::Minimal, Some(kappa), 1e-5);
+    // (a rollout linearises its stored steps without their activation: it must find them too)
+    check_rollout_vjp(&m_b, &s_b, 3, Some(kappa));
+}
+
+/// Two hinged links, each hinge limited to ±`range`, with a motor on each.
+fn limited_pair(range: f64) -> Model {
+    let mut b = ModelBuilder::new().timestep(0.01);
+    for (i, (parent, anchor)) in [("world", [0.0; 3]), ("l0", [0.0, 0.0, -0.5])]
+        .into_iter()
+        .enumerate()
+    {
+        let name = format!("l{i}");
+        b = b
+            .body(BodySpec::new(&name, 0.5, [0.04, 0.04, 0.01]).pos([0.0, 0.0, -0.5 - i as f64]))
+            .joint({
+                let mut j = JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
+                    .axis([0.0, 1.0, 0.0])
+                    .anchors(anchor, [0.0, 0.0, 0.5]);
+                j.range = Some(vec![(-range, range)]);
+                j
+            })
+            .actuator(ActuatorSpec::motor(
+                &format!("m{i}"),
+                &format!("j{i}"),
+                0,
+                1.0,
+            ));
+    }
+    tight(b.compile().unwrap())
+}
+
+/// Where a joint limit comes within the step's reach (`max(margin, 0.1) + 4 h |q̇|` from its
+/// bound), the smoothed step is continuous: the limit's weight is at its floor there
+/// (`solver::taper`). Untapered, the limit pushed with `κ / slack` as it joined: 1e-3 N·m·s
+/// at κ = 1e-4 and 0.1 rad, on links of inertia ~0.04 kg·m².
+#[test]
+fn the_smoothed_step_is_continuous_where_a_joint_limit_comes_within_reach() {
+    let (kappa, range) = (1e-4, 0.8);
+    let m = limited_pair(range);
+    let h = m.options.timestep;
+    for rate in [0.0, 0.5, -2.0] {
+        // the second hinge approaches its upper bound (the first sits mid-range)
+        let reach = m.options.activation_margin.max(0.1) + 4.0 * h * f64::abs(rate);
+        let next = |slack: f64| {
+            let mut s = moving_state(&m, &[0.1, range - slack], &[0.3, rate]);
+            step_smoothed(&m, &mut s, &[0.2, -0.1], kappa).unwrap();
+            nalgebra::DVector::from_vec(ukemi_engine::qvel(&m, &s))
+        };
+        let d = 1e-9;
+        let across = |k: f64| next(reach + k * d) - next(reach - k * d);
+        let jump = (across(1.0) - across(3.0) / 3.0).amax();
+        let untapered = kappa / reach;
+        assert!(jump < 1e-4 * untapered, "rate {rate}: jump {jump:e}");
+    }
+}
+
+/// Inside the limits' taper (slacks below three quarters of the reach, moving either way), the
+/// Jacobians match finite differences of the smoothed step: the partials carry the weight's
+/// slope in the slack (residual differences) and in the rate (the velocity columns' limit
+/// rows), and the coloured partials match the column-by-column ones.
+#[test]
+fn limit_taper_gradients_match_the_smoothed_step() {
+    let (kappa, range) = (1e-3, 0.8);
+    let m = limited_pair(range);
+    for (slack, rate) in [
+        (0.02, 0.5),
+        (0.04, -1.0),
+        (0.06, 0.2),
+        (0.072, -0.1),
+        (0.01, 3.0),
+    ] {
+        for (q, qd) in [
+            ([0.1, range - slack], [0.3, rate]),
+            ([-range + slack, 0.2], [-rate, 0.4]),
+        ] {
+            let s = moving_state(&m, &q, &qd);
+            let u = [0.2, -0.1];
+            let wrt = Wrt::STATE_CTRL;
+            coloured_vs_reference_wrt(&m, &s, &u, Coordinates::Minimal, Some(kappa), wrt, 1e-6);
+            check(&m, &s, &u, Coordinates::Minimal, Some(kappa), 1e-5);
+        }
+    }
+    let s = moving_state(&m, &[0.1, range - 0.03], &[0.3, 0.7]);
+    check_rollout_vjp(&m, &s, 3, Some(kappa));
+}
+
+/// Tendon limits are tapered like joint limits: by the length's slack and rate against the
+/// limits' reach (`max(margin, 0.1) + 4 h Σ |coef q̇|`). The tendon `½ q₀ - ½ q₂` of
+/// [`tendon_chain`] at slacks across its reach: the smoothed step is continuous there, and
+/// inside the taper its Jacobians match finite differences of it (the velocity columns carry
+/// the rate's slope on the tendon's rows) and the coloured partials the column-by-column ones.
+#[test]
+fn tendon_limits_are_tapered_continuously_with_exact_gradients() {
+    let m = tendon_chain(5);
+    let h = m.options.timestep;
+    let lo = -0.3;
+    // L = ½ q₀ - ½ q₂: q₀ sets the slack, q₂ = 0
+    let at = |slack: f64, qd0: f64, qd2: f64| {
+        moving_state(
+            &m,
+            &[2.0 * (lo + slack), 0.2, 0.0, 0.1, -0.2],
+            &[qd0, 0.5, qd2, 0.3, 0.2],
+        )
+    };
+    let ctrl = [-0.5, 0.5, 0.4, 0.1, -0.1];
+    let kappa = 1e-4;
+    for (qd0, qd2) in [(0.0, 0.0), (-0.6, 0.2), (0.8, 0.4)] {
+        let bound = 0.5 * (f64::abs(qd0) + f64::abs(qd2));
+        let reach = m.options.activation_margin.max(0.1) + 4.0 * h * bound;
+        let next = |slack: f64| {
+            let mut s = at(slack, qd0, qd2);
+            step_smoothed(&m, &mut s, &ctrl, kappa).unwrap();
+            nalgebra::DVector::from_vec(ukemi_engine::qvel(&m, &s))
+        };
+        let d = 1e-9;
+        let across = |k: f64| next(reach + k * d) - next(reach - k * d);
+        let jump = (across(1.0) - across(3.0) / 3.0).amax();
+        assert!(
+            jump < 1e-4 * kappa / reach,
+            "rates {qd0}, {qd2}: jump {jump:e}"
+        );
+    }
+    for (slack, qd0, qd2) in [(0.02, -0.6, 0.2), (0.05, 0.8, -0.4), (0.07, -0.2, -0.1)] {
+        let s = at(slack, qd0, qd2);
+        let wrt = Wrt::STATE_CTRL;
+        coloured_vs_reference_wrt(&m, &s, &ctrl, Coordinates::Minimal, Some(1e-3), wrt, 1e-6);
+        check(&m, &s, &ctrl, Coordinates::Minimal, Some(1e-3), 1e-5);
+    }
+    check_rollout_vjp(&m, &at(0.03, -0.5, 0.1), 3, Some(1e-3));
 }

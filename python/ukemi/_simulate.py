@@ -71,9 +71,9 @@ def step(model, state, ctrl=None, *, qfrc_applied=None, xfrc_applied=None, on_fa
 def step_smoothed(model, state, ctrl=None, *, kappa):
     """The smoothed step: the next state on the central path at ``kappa`` (each contact pair
     within reach at ``b ∘ c = kappa w e``, ``w`` tapering from 1 at touching to ~0 before the
-    reach, so the map is continuous where a candidate comes within reach; each limit pair the
-    hard step activated at ``b ∘ c = kappa e``; the others without impulse), the map whose
-    derivatives ``kappa_grad=kappa`` gives.
+    reach, so the map is continuous where a candidate comes within reach; each joint and
+    tendon limit pair the hard step activated likewise, tapered with its slack; the others
+    without impulse), the map whose derivatives ``kappa_grad=kappa`` gives.
 
     Args:
         model, state, ctrl: as for :func:`step`.

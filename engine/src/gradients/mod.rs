@@ -13,9 +13,9 @@
 //! a vector-Jacobian product one transposed back-substitution in all.
 //!
 //! **κ-smoothing.** With `kappa_grad = Some(κ)` the gradient point is the *central-path point*
-//! at κ, the solution of `R(w; κ) = 0` with every complementarity pair of the limits the step
-//! activated held at `b ∘ c = κ e`, and of the contact candidates within reach at
-//! `b ∘ c = κ w e`, `w` a smooth taper of the gap and its rate at the step's start
+//! at κ, the solution of `R(w; κ) = 0` with every complementarity pair of the contact
+//! candidates within reach and of the limits the step activated held at `b ∘ c = κ w e`, `w` a
+//! smooth taper of the gap (a limit side's slack) and its rate at the step's start
 //! (`solver::taper`: 1 touching, at its floor before the activation's reach) whose slope the
 //! partials carry; the others keep no impulse (every one at `κ e` with
 //! `Options::smooth_every_candidate`; see `solver::central::solve`):
@@ -487,6 +487,19 @@ impl SolveLinearization {
         }
         ws.w.copy_from_slice(&stored.w);
         ws.active.copy_from_slice(&stored.active);
+        if kappa_grad.is_some() && !model.options.smooth_every_candidate {
+            // the smoothed step joins the candidates above the taper's floor that the stored
+            // activation left out (`central::join_weighted`): their gaps and rates at the start
+            activation::prepare(model, &point.state, &mut ws);
+        }
+        // the limits' slacks and rates at the start, which the activation records (the κ
+        // taper and the inactive limits' variables read them)
+        for (j, joint) in model.joints.iter().enumerate() {
+            activation::record_limit_start(&point.state, &mut ws, j, joint);
+        }
+        for k in 0..model.tendon_limits.len() {
+            activation::record_tendon_start(model, &point.state, &mut ws, k);
+        }
         ws.saturated.copy_from_slice(&stored.saturated);
         // the features the solve ended with (`evaluate` prepares no candidate prepared here)
         let candidates = stored.frozen.iter().copied();
@@ -578,6 +591,9 @@ impl SolveLinearization {
             rate_rows: (0..model.ncontact())
                 .map(|c| ws.active[c].then(|| ws.contact_step[c].normal_row()))
                 .collect(),
+            limit_slack: &ws.limit_slack_now,
+            limit_rate: &ws.limit_rate_now,
+            limit_adr: &ws.limit_adr,
         });
         let parts = partials::partials(model, &point, ctrl, &w, held, &inputs, method, taper)?;
         times.partials = t0.elapsed().as_secs_f64();

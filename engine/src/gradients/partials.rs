@@ -24,9 +24,10 @@ use crate::model::Model;
 use crate::model::params::Param;
 use crate::model::topology_body_node as body_node;
 use crate::solver::activation::prepare_candidates_holding;
+use crate::solver::activation::{coordinate_rate, limit_rates};
 use crate::solver::newton;
 use crate::solver::saturation::Hold;
-use crate::solver::taper::weight_and_slopes;
+use crate::solver::taper::{limit_weight_and_slopes, weight_and_slopes};
 use crate::state::{Recycled, State, Workspace};
 use crate::step::AppliedForces;
 
@@ -207,6 +208,9 @@ impl<'a> Probe<'a> {
             ctrl,
             &AppliedForces::default(),
         );
+        if tapered.is_some() {
+            record_limit_starts(model, &point.state, &mut ws, None);
+        }
         let base_joints = BaseJoints::of(&ws);
         Probe {
             frozen,
@@ -283,6 +287,9 @@ impl<'a> Probe<'a> {
         prepare_candidates_holding(model, &self.state, &mut self.ws, candidates);
         self.ws.active = active;
         let kappa = self.kappa;
+        if kappa != 0.0 {
+            record_limit_starts(model, &self.state, &mut self.ws, None);
+        }
         newton::evaluate_in(
             model,
             &self.state,
@@ -319,6 +326,9 @@ impl<'a> Probe<'a> {
         }
         let candidates = moved.map(|&c| (c, self.frozen[c]));
         prepare_candidates_holding(model, state, &mut self.ws, candidates);
+        if self.kappa != 0.0 {
+            record_limit_starts(model, state, &mut self.ws, Some(joints));
+        }
         newton::evaluate_in(
             model,
             state,
@@ -350,6 +360,21 @@ fn steps(model: &Model, inputs: &[Input]) -> Vec<f64> {
             _ => FD_STEP,
         })
         .collect()
+}
+
+/// With κ tapered (`solver::taper`): the slacks and rates at `state` of the limited joints
+/// (those set in `joints`, every one with `None`) and of every tendon limit, which the limits'
+/// κ weights read.
+fn record_limit_starts(model: &Model, state: &State, ws: &mut Workspace, joints: Option<&[bool]>) {
+    use crate::solver::activation::{record_limit_start, record_tendon_start};
+    for (j, joint) in model.joints.iter().enumerate() {
+        if joints.is_none_or(|on| on[j]) {
+            record_limit_start(state, ws, j, joint);
+        }
+    }
+    for k in 0..model.tendon_limits.len() {
+        record_tendon_start(model, state, ws, k);
+    }
 }
 
 /// Compute the partials at `w` (the gradient point of `point` with controls `ctrl`; contact
@@ -400,15 +425,7 @@ pub(super) fn partials(
     out_base.coords = point.coords;
     let refresh = plan.refresh.as_deref();
     residual_columns(&mut probe, &mut out, inputs, &eps, w, &plan.groups, refresh);
-    let pairs = (&plan.light_pairs[..], taper.as_ref());
-    light_columns(
-        &mut probe,
-        &mut out,
-        inputs,
-        &eps,
-        &plan.light_groups,
-        pairs,
-    );
+    light_columns(&mut probe, &mut out, inputs, &eps, &plan, taper.as_ref());
     plane_columns(model, &mut out, &plan.plane_columns, taper.as_ref());
     output_partials(
         &mut probe,
@@ -475,9 +492,11 @@ fn light_columns(
     out: &mut Partials,
     inputs: &[Input],
     eps: &[f64],
-    groups: &[Vec<usize>],
-    (pairs, taper): (&[Vec<usize>], Option<&Taper>),
+    plan: &Plan,
+    taper: Option<&Taper>,
 ) {
+    let groups = &plan.light_groups;
+    let (pairs, limits, tendons) = (&plan.light_pairs, &plan.light_limits, &plan.light_tendons);
     let (model, point) = (probe.base, probe.point);
     // the free Jacobians and coordinates of the gradient point (a residual evaluation leaves
     // those of its perturbed joints)
@@ -539,7 +558,11 @@ fn light_columns(
             let body_rows = out.rows[c].len()
                 - (pairs[c].iter())
                     .map(|&j| super::plan::pair_rows(model, j).len())
-                    .sum::<usize>();
+                    .sum::<usize>()
+                - 2 * (limits[c].iter())
+                    .map(|&j| model.joints[j].limits.len())
+                    .sum::<usize>()
+                - 2 * tendons[c].len();
             for &(s, l) in &out.rows[c][..body_rows] {
                 for r in s..s + l {
                     out.r_z[k] = body_row(&dr, r);
@@ -557,6 +580,52 @@ fn light_columns(
                     });
                     let shift = t.shift(model, j, 0.0, drate);
                     k += t.write_pairs(model, j, shift, &mut out.r_z[k..]);
+                }
+                // a limited coordinate's rate is linear in the twists: its change along the
+                // column is the perturbed state's (the other columns of the group move none of
+                // the joint's bodies: their supports would share its rows)
+                for &j in &limits[c] {
+                    let joint = &model.joints[j];
+                    let (mut rates, mut base) = ([0.0; 6], [0.0; 6]);
+                    let n = joint.limits.len();
+                    limit_rates(&probe.state, joint, &mut rates[..n]);
+                    limit_rates(&point.state, joint, &mut base[..n]);
+                    for i in 0..n {
+                        let a = t.limit_adr[j] + i;
+                        let drate = (rates[i] - base[i]) / FD_STEP;
+                        for side in 0..2 {
+                            let slack = t.limit_slack[a][side];
+                            let [_, _, by_rate] =
+                                limit_weight_and_slopes(model, slack, t.limit_rate[a]);
+                            out.r_z[k] = -t.kappa * by_rate * drate;
+                            k += 1;
+                        }
+                    }
+                }
+                // a tendon's rate `Σ coef q̇` moves by its terms on the joints the column
+                // moves (the group's other columns move none of those: they would share rows)
+                let Input::State(i) = inputs[c] else {
+                    unreachable!("twist columns are state columns")
+                };
+                let touched = state_bodies(model, point.coords, &below, i).0;
+                let nl = t.limit_slack.len() - model.tendon_limits.len();
+                for &n in &tendons[c] {
+                    let mut drate = 0.0;
+                    for &(j, dof, coef) in &model.tendon_limits[n].terms {
+                        let joint = &model.joints[j];
+                        if touched.contains(&joint.parent) || touched.contains(&joint.child) {
+                            let rate = |s: &State| coordinate_rate(s, joint, dof);
+                            drate += coef * (rate(&probe.state) - rate(&point.state)) / FD_STEP;
+                        }
+                    }
+                    let a = nl + n;
+                    for side in 0..2 {
+                        let slack = t.limit_slack[a][side];
+                        let [_, _, by_rate] =
+                            limit_weight_and_slopes(model, slack, t.limit_rate[a]);
+                        out.r_z[k] = -t.kappa * by_rate * drate;
+                        k += 1;
+                    }
                 }
             }
             debug_assert_eq!(k, out.r_start[c + 1]);
@@ -578,6 +647,10 @@ pub(super) struct Taper<'t> {
     /// Each active candidate's gap rate as a row in the twists `(v, ω_body)` of its bodies a
     /// (0..6) and b (6..12): `ContactFrame`'s normal row at the step's start.
     pub rate_rows: Vec<Option<[f64; 12]>>,
+    /// Each limited coordinate's slacks and rate at the step's start, from `limit_adr[j]`.
+    pub limit_slack: &'t [[f64; 2]],
+    pub limit_rate: &'t [f64],
+    pub limit_adr: &'t [usize],
 }
 
 impl Taper<'_> {

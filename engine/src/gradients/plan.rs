@@ -180,6 +180,18 @@ pub(super) fn pair_rows(model: &Model, k: usize) -> Vec<(usize, usize)> {
     }
 }
 
+/// The complementarity rows of joint `j`'s limits (`γ_lo s_lo`, `γ_hi s_hi` of each), whose κ
+/// shifts their weights scale (`solver::taper`).
+pub(super) fn limit_pair_rows(model: &Model, j: usize) -> Vec<(usize, usize)> {
+    let Some(n) = model.topology.limit_node[j] else {
+        return Vec::new();
+    };
+    let o = model.topology.pattern.offset(n);
+    (0..model.joints[j].limits.len())
+        .flat_map(|i| [(o + 4 * i + 1, 1), (o + 4 * i + 3, 1)])
+        .collect()
+}
+
 /// Row supports of the columns that are not light at the activation `active` (a light
 /// column's rows come from the skeleton; its entry here is empty).
 /// `tapered`: the activation when κ is weighted per candidate (`solver::taper`), whose taper
@@ -395,6 +407,11 @@ pub(super) struct Plan {
     /// follow its body rows: those on the bodies whose twists it changes, when κ is weighted
     /// by the gap rates at the start (`solver::taper`); empty otherwise.
     pub(super) light_pairs: Vec<Vec<usize>>,
+    /// Likewise the active limited joints on those bodies, whose rows ([`limit_pair_rows`])
+    /// follow the candidates'.
+    pub(super) light_limits: Vec<Vec<usize>>,
+    /// Likewise the active tendon limits with a term on such a joint, whose rows follow.
+    pub(super) light_tendons: Vec<Vec<usize>>,
     /// Translation columns whose tree meets the rest only at world planes, with each boundary
     /// candidate and its gap row's entry: closed form, no evaluation ([`plane_entries`]). Their
     /// rows are [`plane_rows`]'s.
@@ -438,6 +455,41 @@ impl Plan {
                 _ => Vec::new(),
             })
             .collect();
+        // and of the active limits of the joints on those bodies
+        let nc = model.ncontact();
+        let light_limits: Vec<Vec<usize>> = (0..inputs.len())
+            .map(|c| match inputs[c] {
+                Input::State(_) if tapered && sk.light[c] => {
+                    let touched = &sk.bodies[c].0;
+                    let on = |b: usize| touched.contains(&b);
+                    (model.joints.iter().enumerate())
+                        .filter(|(j, _)| model.topology.limit_node[*j].is_some() && active[nc + j])
+                        .filter(|(_, joint)| on(joint.parent) || on(joint.child))
+                        .map(|(j, _)| j)
+                        .collect()
+                }
+                _ => Vec::new(),
+            })
+            .collect();
+        // and of the active tendon limits with a term on a joint of those bodies
+        let tendons = nc + model.njoint();
+        let light_tendons: Vec<Vec<usize>> = (0..inputs.len())
+            .map(|c| match inputs[c] {
+                Input::State(_) if tapered && sk.light[c] => {
+                    let touched = &sk.bodies[c].0;
+                    let on = |j: usize| {
+                        let joint = &model.joints[j];
+                        touched.contains(&joint.parent) || touched.contains(&joint.child)
+                    };
+                    (model.tendon_limits.iter().enumerate())
+                        .filter(|(k, _)| active[tendons + k])
+                        .filter(|(_, t)| t.terms.iter().any(|&(j, _, _)| on(j)))
+                        .map(|(k, _)| k)
+                        .collect()
+                }
+                _ => Vec::new(),
+            })
+            .collect();
         let rows: Vec<Vec<(usize, usize)>> = sup
             .iter()
             .zip(&sk.light_rows)
@@ -445,7 +497,19 @@ impl Plan {
             .map(|(c, (s, light))| match (sk.light[c], &plane[c]) {
                 (true, _) => {
                     let pairs = light_pairs[c].iter().flat_map(|&k| pair_rows(model, k));
-                    light.iter().copied().chain(pairs).collect()
+                    let limits = light_limits[c]
+                        .iter()
+                        .flat_map(|&j| limit_pair_rows(model, j));
+                    let tendon_rows = light_tendons[c].iter().flat_map(|&k| {
+                        let o = model.topology.pattern.offset(model.topology.tendon_node[k]);
+                        [(o + 1, 1), (o + 3, 1)]
+                    });
+                    let (light, pairs) = (light.iter().copied(), pairs);
+                    light
+                        .chain(pairs)
+                        .chain(limits)
+                        .chain(tendon_rows)
+                        .collect()
                 }
                 (false, Some((ks, _))) => ks
                     .iter()
@@ -503,6 +567,8 @@ impl Plan {
             refresh: Some(refresh),
             light_groups: sk.light_groups.clone(),
             light_pairs,
+            light_limits,
+            light_tendons,
             plane_columns,
             output: sk.output.clone(),
         }
@@ -523,6 +589,8 @@ impl Plan {
             refresh: None,
             light_groups: Vec::new(),
             light_pairs: vec![Vec::new(); inputs.len()],
+            light_limits: vec![Vec::new(); inputs.len()],
+            light_tendons: vec![Vec::new(); inputs.len()],
             plane_columns: Vec::new(),
             output: Arc::new(OutputPlan::new(model, coords, inputs, None, &[])),
         }

@@ -469,7 +469,7 @@ pub(crate) fn candidate_margin(model: &Model, contact: &crate::contact::Contact)
 }
 
 /// Reach of a joint limit's activation (rad or m) before the rate term: [`activate_limits`].
-const LIMIT_REACH: f64 = 0.1;
+pub(crate) const LIMIT_REACH: f64 = 0.1;
 
 /// Activate the limits of every joint with a limited coordinate within `max(activation_margin,
 /// LIMIT_REACH) + 4 h |θ̇|` of a bound at the step's start (θ̇ the joint's current rate); with
@@ -502,12 +502,11 @@ fn activate_limits(model: &Model, state: &State, ws: &mut Workspace, reach: Reac
         if model.topology.limit_node[j].is_none() {
             continue;
         }
-        let (q, qd) = joint_state(state, joint);
+        record_limit_start(state, ws, j, joint);
         let mut near = reach == Reach::Bound;
-        for (i, &(dof, lo, hi)) in joint.limits.iter().enumerate() {
-            let slack = [q[dof] - lo, hi - q[dof]];
-            ws.limit_slack_now[ws.limit_adr[j] + i] = slack;
-            near |= within_reach(slack, qd[dof].abs());
+        for i in 0..joint.limits.len() {
+            let k = ws.limit_adr[j] + i;
+            near |= within_reach(ws.limit_slack_now[k], ws.limit_rate_now[k].abs());
         }
         if near && !ws.active[nc + j] {
             ws.active[nc + j] = true;
@@ -519,16 +518,9 @@ fn activate_limits(model: &Model, state: &State, ws: &mut Workspace, reach: Reac
         ws.limit_slack_now.len() - model.tendon_limits.len(),
         model.njoint(),
     );
-    for (k, tendon) in model.tendon_limits.iter().enumerate() {
-        let (mut len, mut rate) = (0.0, 0.0);
-        for &(ji, dof, coef) in &tendon.terms {
-            let (q, qd) = joint_state(state, &model.joints[ji]);
-            len += coef * q[dof];
-            rate += (coef * qd[dof]).abs();
-        }
-        let (lo, hi) = tendon.range;
-        let slack = [len - lo, hi - len];
-        ws.limit_slack_now[nl + k] = slack;
+    for k in 0..model.tendon_limits.len() {
+        let rate = record_tendon_start(model, state, ws, k);
+        let slack = ws.limit_slack_now[nl + k];
         let near = reach == Reach::Bound || within_reach(slack, rate);
         if near && !ws.active[nc + nj + k] {
             ws.active[nc + nj + k] = true;
@@ -536,6 +528,62 @@ fn activate_limits(model: &Model, state: &State, ws: &mut Workspace, reach: Reac
         }
     }
     added
+}
+
+/// Record the slacks `(q - lo, hi - q)` and rates `q̇` of joint `j`'s limited coordinates at
+/// `state` (`limit_slack_now`, `limit_rate_now`).
+pub(crate) fn record_limit_start(
+    state: &State,
+    ws: &mut Workspace,
+    j: usize,
+    joint: &crate::joints::Joint,
+) {
+    if joint.limits.is_empty() {
+        return;
+    }
+    let (q, qd) = joint_state(state, joint);
+    for (i, &(dof, lo, hi)) in joint.limits.iter().enumerate() {
+        let k = ws.limit_adr[j] + i;
+        ws.limit_slack_now[k] = [q[dof] - lo, hi - q[dof]];
+        ws.limit_rate_now[k] = qd[dof];
+    }
+}
+
+/// Record tendon limit `k`'s slacks `(L - lo, hi - L)` and rate `L̇` at `state`
+/// (`limit_slack_now`, `limit_rate_now` past the joints' limits); returns the bound on the rate
+/// that the activation reads, `Σ |coef q̇|`.
+pub(crate) fn record_tendon_start(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    k: usize,
+) -> f64 {
+    let tendon = &model.tendon_limits[k];
+    let (mut len, mut bound, mut rate) = (0.0, 0.0, 0.0);
+    for &(ji, dof, coef) in &tendon.terms {
+        let (q, qd) = joint_state(state, &model.joints[ji]);
+        len += coef * q[dof];
+        bound += (coef * qd[dof]).abs();
+        rate += coef * qd[dof];
+    }
+    let (lo, hi) = tendon.range;
+    let at = ws.limit_slack_now.len() - model.tendon_limits.len() + k;
+    ws.limit_slack_now[at] = [len - lo, hi - len];
+    ws.limit_rate_now[at] = rate;
+    bound
+}
+
+/// The rates `q̇` of joint `j`'s limited coordinates at `state`, into `out`.
+pub(crate) fn limit_rates(state: &State, joint: &crate::joints::Joint, out: &mut [f64]) {
+    let (_, qd) = joint_state(state, joint);
+    for (o, &(dof, _, _)) in out.iter_mut().zip(&joint.limits) {
+        *o = qd[dof];
+    }
+}
+
+/// The rate `q̇` of `joint`'s coordinate `dof` at `state`.
+pub(crate) fn coordinate_rate(state: &State, joint: &crate::joints::Joint, dof: usize) -> f64 {
+    joint_state(state, joint).1[dof]
 }
 
 /// Coordinates and rates of `joint` at `state`.

@@ -1,6 +1,7 @@
 //! The central-path point at κ of a solved step: the interior solution of the relaxed problem
-//! (each complementarity pair the step activated at `b ∘ c = κ e`, a contact candidate's at
-//! `κ w e` with its taper weight `w`, [`super::taper`]), the smoothed step of the
+//! (each complementarity pair the step activated at `b ∘ c = κ w e`, `w` its contact
+//! candidate's or limit's taper weight, [`super::taper`]), the
+//! smoothed step of the
 //! gradients (`kappa_grad`). Started either from the step's hard solution moved onto the κ
 //! central path pair by pair and solved by Newton's method at κ ([`Start::Hard`], [`follow`]),
 //! or from the neutral interior point by the predictor-corrector of [`super::ipm`] with
@@ -58,8 +59,8 @@ const NEAR: f64 = 1e-6;
 /// Solve for the central-path point at `kappa` of the prepared, solved step in `ws` from
 /// `start`, over the contact candidates and limits the step's solve activated (those within
 /// reach of touching; the others keep no impulse, as in the hard step) and the candidates whose
-/// taper weight is above its floor ([`join_weighted`]), each candidate's κ weighted by
-/// [`super::taper`]; or over every one at κ with `Options::smooth_every_candidate`.
+/// taper weight is above its floor ([`join_weighted`]), each candidate's and joint limit's κ
+/// weighted by [`super::taper`]; or over every one at κ with `Options::smooth_every_candidate`.
 ///
 /// Why not every candidate: each pair held at `b ∘ c = κ` pushes with `κ / gap` however far
 /// it is, and on the shared robots every candidate joining cost the gradient 6-27× the hard
@@ -247,17 +248,13 @@ pub(crate) fn centre_some(
     // rows `s - φ`, `η₂:₃ - v_t`, ... at the hard velocities (independent of κ)
     evaluate(model, state, ws, false, 0.0);
     let t = &model.topology;
-    let taper = ws.kappa_taper;
     for (c, contact) in model.contacts.iter().enumerate() {
         if !contact_selected(c) {
             continue;
         }
         // (an inactive candidate's gap at the start may be a bound, `activation::prepare`)
-        let start = (taper && ws.active[c]).then_some(super::taper::AtStart {
-            phi: &ws.contact_phi_now,
-            rate: &ws.contact_rate_now,
-        });
-        let kappa = kappa * super::taper::weight(model, start, Some(c));
+        let start = super::taper::at_start!(ws).filter(|_| ws.active[c]);
+        let kappa = kappa * super::taper::weight(model, start, c, 0, 0);
         let o = t.pattern.offset(t.contact_node[c]);
         let dim = contact.model.dim();
         let (x, r) = (&mut ws.w[o..o + dim], &ws.residual[o..o + dim]);
@@ -290,11 +287,14 @@ pub(crate) fn centre_some(
             continue;
         }
         let o = t.pattern.offset(n);
+        let owner = model.ncontact() + j;
         for i in 0..joint.limits.len() {
             let b = o + 4 * i;
             for (g, s) in [(b, b + 1), (b + 2, b + 3)] {
                 // row `s - distance`
                 let distance = ws.w[s] - ws.residual[s - 1];
+                let start = super::taper::at_start!(ws).filter(|_| ws.active[owner]);
+                let kappa = kappa * super::taper::weight(model, start, owner, b, g - b);
                 (ws.w[g], ws.w[s]) = orthant_pair(ws.w[g], distance, kappa);
             }
         }
@@ -326,12 +326,14 @@ pub(crate) fn unblock(model: &Model, state: &State, ws: &mut Workspace, kappa: f
     };
     let mut shortest: f64 = f64::INFINITY;
     let (w, d) = (&ws.w, &ws.delta);
+    // (the contacts' and the joint limits' pairs: tendon limits are not moved)
+    let unblocked = model.ncontact() + model.njoint();
     for_each_owned_pair(
         model,
         &ws.active,
         &ws.saturated,
         |owner, o, p, q, _, soc| {
-            if owner.is_some() {
+            if owner < unblocked {
                 shortest = shortest.min(reach(w, d, o, p, q, soc));
             }
         },
@@ -346,8 +348,8 @@ pub(crate) fn unblock(model: &Model, state: &State, ws: &mut Workspace, kappa: f
         &ws.active,
         &ws.saturated,
         |owner, o, p, q, _, soc| {
-            if let Some(i) = owner {
-                blocking[i] |= reach(w, d, o, p, q, soc) <= BLOCKING * shortest;
+            if owner < unblocked {
+                blocking[owner] |= reach(w, d, o, p, q, soc) <= BLOCKING * shortest;
             }
         },
     );

@@ -67,13 +67,14 @@ pub(crate) fn for_each_pair_except(
     });
 }
 
-/// [`for_each_pair_except`], also passing who owns the pair: `Some(c)` for contact candidate
-/// `c`, `Some(ncontact + j)` for a limit of joint `j`, `None` for a tendon limit.
+/// [`for_each_pair_except`], also passing who owns the pair (its activation flag's index): `c`
+/// for contact candidate `c`, `ncontact + j` for a limit of joint `j`, `ncontact + njoint + k`
+/// for tendon limit `k`.
 pub(crate) fn for_each_owned_pair(
     model: &Model,
     active: &[bool],
     saturated: &[Option<Hold>],
-    mut f: impl FnMut(Option<usize>, usize, usize, usize, usize, bool),
+    mut f: impl FnMut(usize, usize, usize, usize, usize, bool),
 ) {
     let t = &model.topology;
     let nc = model.ncontact();
@@ -81,11 +82,11 @@ pub(crate) fn for_each_owned_pair(
         let contact = &model.contacts[c];
         let o = t.pattern.offset(t.contact_node[c]);
         for &(p, d, r) in orthant_pairs(contact.model) {
-            f(Some(c), o, p, d, r, false);
+            f(c, o, p, d, r, false);
         }
         let held = saturated.get(c).is_some_and(|s| s.is_some());
         if contact.model == ContactModel::Nonlinear && !held {
-            f(Some(c), o, SOC.0, SOC.1, SOC.2, true);
+            f(c, o, SOC.0, SOC.1, SOC.2, true);
         }
     }
     for (j, joint) in model.joints.iter().enumerate() {
@@ -93,7 +94,7 @@ pub(crate) fn for_each_owned_pair(
             let o = t.pattern.offset(n);
             for i in 0..joint.limits.len() {
                 for &(p, d, r) in &LIMIT_PAIRS {
-                    f(Some(nc + j), o + 4 * i, p, d, r, false);
+                    f(nc + j, o + 4 * i, p, d, r, false);
                 }
             }
         }
@@ -104,7 +105,7 @@ pub(crate) fn for_each_owned_pair(
             continue;
         }
         for &(p, d, r) in &LIMIT_PAIRS {
-            f(None, t.pattern.offset(n), p, d, r, false);
+            f(tendons + k, t.pattern.offset(n), p, d, r, false);
         }
     }
 }
@@ -403,10 +404,7 @@ pub(crate) fn evaluate(
         }
     }
     super::tendon::add_rows(model, ws, w, residual);
-    let start = ws.kappa_taper.then_some(super::taper::AtStart {
-        phi: &ws.contact_phi_now,
-        rate: &ws.contact_rate_now,
-    });
+    let start = super::taper::at_start!(ws);
     let shifts = Shifts {
         kappa,
         start,
@@ -543,13 +541,13 @@ fn violations(
         residual[o + row] -= k;
     };
     let nc = model.ncontact();
-    let written = |owner: Option<usize>| match owner {
-        Some(i) if i >= nc => shifts.joint_filter.get(i - nc).is_none_or(|&on| on),
+    let written = |owner: usize| match owner {
+        i if i >= nc => shifts.joint_filter.get(i - nc).is_none_or(|&on| on),
         _ => true,
     };
     for_each_owned_pair(model, active, saturated, |owner, o, p, _, row, soc| {
         let k = match written(owner) {
-            true => shifts.kappa * super::taper::weight(model, shifts.start, owner),
+            true => shifts.kappa * super::taper::weight(model, shifts.start, owner, o, p),
             false => 0.0,
         };
         is_comp(o, p, row, soc, k, residual)
@@ -971,11 +969,9 @@ pub(crate) fn scale_soc_rows(model: &Model, ws: &mut Workspace, trial: bool, kap
         let o = t.pattern.offset(t.contact_node[c]);
         let (xi, eta) = (nt.w * v3(w, o + SOC.0), nt.w_inv * v3(w, o + SOC.1));
         let r = soc_product(&xi, &eta);
-        let start = ws.kappa_taper.then_some(super::taper::AtStart {
-            phi: &ws.contact_phi_now,
-            rate: &ws.contact_rate_now,
-        });
-        ws.residual[o + SOC.2] = r[0] - kappa * super::taper::weight(model, start, Some(c));
+        let start = super::taper::at_start!(ws);
+        let k = kappa * super::taper::weight(model, start, c, o, SOC.0);
+        ws.residual[o + SOC.2] = r[0] - k;
         ws.residual[o + SOC.2 + 1] = r[1];
         ws.residual[o + SOC.2 + 2] = r[2];
     }

@@ -409,16 +409,13 @@ pub(crate) fn for_each_live_range(
 fn shift_complementarity(model: &Model, ws: &mut Workspace, kappa: f64) {
     if kappa != 0.0 {
         let r = &mut ws.residual;
-        let start = ws.kappa_taper.then_some(super::taper::AtStart {
-            phi: &ws.contact_phi_now,
-            rate: &ws.contact_rate_now,
-        });
+        let start = super::taper::at_start!(ws);
         super::inequality::for_each_owned_pair(
             model,
             &ws.active,
             &ws.saturated,
-            |owner, o, _, _, row, _| {
-                r[o + row] -= kappa * super::taper::weight(model, start, owner)
+            |owner, o, p, _, row, _| {
+                r[o + row] -= kappa * super::taper::weight(model, start, owner, o, p)
             },
         );
     }

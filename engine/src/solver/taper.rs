@@ -15,7 +15,13 @@
 //! step's corner rule left out), so a candidate crosses the activation's boundary with `w` at
 //! its floor, zero slope and zero curvature: the map and its Jacobians change continuously.
 //!
-//! `w` reads the gap and its rate at the step's start (the current configuration and
+//! A joint limit's two sides are tapered alike, each by its slack at the start against
+//! [`REACH_FRACTION`] of the limits' reach (`max(margin, 0.1) + 4 h |q̇|`,
+//! [`limit_distance`]): untapered, a limit pushed with `κ / slack` as its joint came within
+//! reach (3e-3 N·m·s at κ = 3e-4 and 0.1 rad). Tendon limits likewise, by the length's slack
+//! and rate `Σ coef q̇` (below the activation's rate bound `Σ |coef q̇|`).
+//!
+//! `w` reads the gaps, slacks and rates at the step's start (the current configuration and
 //! velocities): not the solve's variables, only the state and the model, whose partials then
 //! carry `-κ ∂w/∂z` on the complementarity rows (`gradients::partials`).
 use crate::model::Model;
@@ -44,13 +50,33 @@ pub(crate) const REACH_FRACTION: f64 = 0.75;
 /// The approach speed (m/s) over which the reach's `max(u, 0)` is rounded ([`approach`]).
 pub(crate) const SPEED_ROUNDING: f64 = 0.01;
 
-/// The gap and its rate of each contact candidate at the step's start (`Workspace`'s
-/// `contact_phi_now`, `contact_rate_now`): what the weights read.
+/// What the weights read, at the step's start: each contact candidate's gap and its rate
+/// (`Workspace`'s `contact_phi_now`, `contact_rate_now`), each limited coordinate's slacks
+/// and rate (`limit_slack_now`, `limit_rate_now`, indexed from `limit_adr`). Built by
+/// [`at_start`].
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct AtStart<'a> {
     pub phi: &'a [f64],
     pub rate: &'a [f64],
+    pub limit_slack: &'a [[f64; 2]],
+    pub limit_rate: &'a [f64],
+    pub limit_adr: &'a [usize],
 }
+
+/// `Some(AtStart)` of a workspace when its κ is tapered (`kappa_taper`), borrowing only the
+/// fields it reads (so that the caller may write the residual meanwhile).
+macro_rules! at_start {
+    ($ws:expr) => {
+        $ws.kappa_taper.then_some($crate::solver::taper::AtStart {
+            phi: &$ws.contact_phi_now,
+            rate: &$ws.contact_rate_now,
+            limit_slack: &$ws.limit_slack_now,
+            limit_rate: &$ws.limit_rate_now,
+            limit_adr: &$ws.limit_adr,
+        })
+    };
+}
+pub(crate) use at_start;
 
 /// The weight at `m = gap / taper distance`: 1 up to [`FULL`], then `1 - S(t)` with
 /// `S(t) = t³ (10 - 15 t + 6 t²)` over `t = (m - FULL) / (1 - FULL)`, to the floor at `m = 1`:
@@ -113,16 +139,62 @@ pub(crate) fn weight_and_slopes(model: &Model, c: usize, phi: f64, rate: f64) ->
     [weight_at(m), s / d, -s * m * dd / d]
 }
 
-/// κ's weight on the pairs owned by `owner` (`Some(c)` for contact candidate `c`, as
-/// [`super::inequality::for_each_owned_pair`] passes it), with the candidates' gaps and rates
-/// at the step's start `start`; `None` (no taper) and limits weigh 1.
-pub(crate) fn weight(model: &Model, start: Option<AtStart>, owner: Option<usize>) -> f64 {
-    match (start, owner) {
-        (Some(s), Some(c)) if c < model.ncontact() => {
-            weight_and_slopes(model, c, s.phi[c], s.rate[c])[0]
-        }
-        _ => 1.0,
+/// A limit side's taper distance at the rate `rate` of its coordinate and its derivative in
+/// the rate: [`REACH_FRACTION`] of `max(margin, LIMIT_REACH) + 4 h a(rate)`, `a` a smooth lower
+/// bound of `|rate|` (`√(rate² + τ²) - τ`), below the reach of the limits' activation
+/// (`activation::activate_limits`: both sides of a coordinate by its speed).
+pub(crate) fn limit_distance(model: &Model, rate: f64) -> (f64, f64) {
+    let o = &model.options;
+    let t = SPEED_ROUNDING;
+    let root = rate.hypot(t);
+    let k = REACH_FRACTION;
+    let fixed = o.activation_margin.max(super::activation::LIMIT_REACH);
+    (
+        k * (fixed + 4.0 * o.timestep * (root - t)),
+        4.0 * k * o.timestep * rate / root,
+    )
+}
+
+/// A limit side's weight and its derivatives in the side's slack and in the coordinate's rate
+/// (the upper side's slack `hi - q` falls as `q` rises, its distance reads `|q̇|` alike).
+pub(crate) fn limit_weight_and_slopes(model: &Model, slack: f64, rate: f64) -> [f64; 3] {
+    let (d, dd) = limit_distance(model, rate);
+    if !d.is_finite() || d <= 0.0 {
+        return [1.0, 0.0, 0.0];
     }
+    let m = slack / d;
+    let s = slope_at(m);
+    [weight_at(m), s / d, -s * m * dd / d]
+}
+
+/// κ's weight on the pair at node offset `o`, primal index `p` (the lower side of a limit for
+/// `p = 0`), owned by `owner` (as [`super::inequality::for_each_owned_pair`] passes them: its
+/// activation flag's index), with the gaps, slacks and rates at the step's start `start`
+/// (`None`: no taper, weight 1).
+pub(crate) fn weight(
+    model: &Model,
+    start: Option<AtStart>,
+    owner: usize,
+    o: usize,
+    p: usize,
+) -> f64 {
+    let Some(s) = start else {
+        return 1.0;
+    };
+    let (nc, nj) = (model.ncontact(), model.njoint());
+    let k = if owner < nc {
+        return weight_and_slopes(model, owner, s.phi[owner], s.rate[owner])[0];
+    } else if owner < nc + nj {
+        let j = owner - nc;
+        let Some(node) = model.topology.limit_node[j] else {
+            return 1.0;
+        };
+        s.limit_adr[j] + (o - model.topology.pattern.offset(node)) / 4
+    } else {
+        // tendon limits follow the joints' limited coordinates
+        s.limit_slack.len() - model.tendon_limits.len() + (owner - nc - nj)
+    };
+    limit_weight_and_slopes(model, s.limit_slack[k][p / 2], s.limit_rate[k])[0]
 }
 
 #[cfg(test)]
