@@ -496,7 +496,6 @@ fn light_columns(
     taper: Option<&Taper>,
 ) {
     let groups = &plan.light_groups;
-    let (pairs, limits, tendons) = (&plan.light_pairs, &plan.light_limits, &plan.light_tendons);
     let (model, point) = (probe.base, probe.point);
     // the free Jacobians and coordinates of the gradient point (a residual evaluation leaves
     // those of its perturbed joints)
@@ -528,10 +527,12 @@ fn light_columns(
         }
         for &c in group {
             dr.fill([0.0; 6]);
+            let mut touched = Vec::new();
             let input = match inputs[c] {
                 Input::State(i) => {
                     dt.fill([0.0; 6]);
-                    for b in state_bodies(model, point.coords, &below, i).0 {
+                    touched = state_bodies(model, point.coords, &below, i).0;
+                    for &b in &touched {
                         let ((v1, w1), (v0, w0)) =
                             (probe.state.velocity(b), point.state.velocity(b));
                         let d = [v1 - v0, w1 - w0];
@@ -555,78 +556,15 @@ fn light_columns(
             );
             // scatter the body rows onto the column's support; the candidates' rows follow
             let mut k = out.r_start[c];
-            let body_rows = out.rows[c].len()
-                - (pairs[c].iter())
-                    .map(|&j| super::plan::pair_rows(model, j).len())
-                    .sum::<usize>()
-                - 2 * (limits[c].iter())
-                    .map(|&j| model.joints[j].limits.len())
-                    .sum::<usize>()
-                - 2 * tendons[c].len();
-            for &(s, l) in &out.rows[c][..body_rows] {
+            for &(s, l) in &out.rows[c][..plan.light_body_ranges[c]] {
                 for r in s..s + l {
                     out.r_z[k] = body_row(&dr, r);
                     k += 1;
                 }
             }
             if let (Some(t), Light::Twists(dt)) = (taper, input) {
-                for &j in &pairs[c] {
-                    let drate = t.rate_rows[j].map_or(0.0, |row| {
-                        let contact = &model.contacts[j];
-                        let [a, b] = [contact.geom_a, contact.geom_b].map(|g| model.geoms[g].body);
-                        let twist = |b: usize| if b == 0 { [0.0; 6] } else { dt[b] };
-                        let (ta, tb) = (twist(a), twist(b));
-                        (0..6).map(|i| row[i] * ta[i] + row[6 + i] * tb[i]).sum()
-                    });
-                    let shift = t.shift(model, j, 0.0, drate);
-                    k += t.write_pairs(model, j, shift, &mut out.r_z[k..]);
-                }
-                // a limited coordinate's rate is linear in the twists: its change along the
-                // column is the perturbed state's (the other columns of the group move none of
-                // the joint's bodies: their supports would share its rows)
-                for &j in &limits[c] {
-                    let joint = &model.joints[j];
-                    let (mut rates, mut base) = ([0.0; 6], [0.0; 6]);
-                    let n = joint.limits.len();
-                    limit_rates(&probe.state, joint, &mut rates[..n]);
-                    limit_rates(&point.state, joint, &mut base[..n]);
-                    for i in 0..n {
-                        let a = t.limit_adr[j] + i;
-                        let drate = (rates[i] - base[i]) / FD_STEP;
-                        for side in 0..2 {
-                            let slack = t.limit_slack[a][side];
-                            let [_, _, by_rate] =
-                                limit_weight_and_slopes(model, slack, t.limit_rate[a]);
-                            out.r_z[k] = -t.kappa * by_rate * drate;
-                            k += 1;
-                        }
-                    }
-                }
-                // a tendon's rate `Σ coef q̇` moves by its terms on the joints the column
-                // moves (the group's other columns move none of those: they would share rows)
-                let Input::State(i) = inputs[c] else {
-                    unreachable!("twist columns are state columns")
-                };
-                let touched = state_bodies(model, point.coords, &below, i).0;
-                let nl = t.limit_slack.len() - model.tendon_limits.len();
-                for &n in &tendons[c] {
-                    let mut drate = 0.0;
-                    for &(j, dof, coef) in &model.tendon_limits[n].terms {
-                        let joint = &model.joints[j];
-                        if touched.contains(&joint.parent) || touched.contains(&joint.child) {
-                            let rate = |s: &State| coordinate_rate(s, joint, dof);
-                            drate += coef * (rate(&probe.state) - rate(&point.state)) / FD_STEP;
-                        }
-                    }
-                    let a = nl + n;
-                    for side in 0..2 {
-                        let slack = t.limit_slack[a][side];
-                        let [_, _, by_rate] =
-                            limit_weight_and_slopes(model, slack, t.limit_rate[a]);
-                        out.r_z[k] = -t.kappa * by_rate * drate;
-                        k += 1;
-                    }
-                }
+                let moved = (&probe.state, &touched[..], dt);
+                k += weight_rows(model, plan, c, t, point, moved, &mut out.r_z[k..]);
             }
             debug_assert_eq!(k, out.r_start[c + 1]);
         }
@@ -634,6 +572,61 @@ fn light_columns(
             probe.restore(inputs, &states);
         }
     }
+}
+
+/// The κ weights' rows of the twist column `c` (`plan`'s `light_pairs`, `light_limits`,
+/// `light_tendons`, in that order) into `out`: `-κ ∂w/∂(rate) · ∂(rate)/∂z` of each contact
+/// candidate, limit side and tendon limit side on the bodies it moves. `moved`: the perturbed
+/// state, the bodies whose twists the column changes and their twists per unit (`dt`). A rate
+/// is linear in the twists, so its change along the column is the perturbed state's: the
+/// group's other columns move none of these bodies (their supports would share the rows).
+/// Returns how many entries it wrote.
+fn weight_rows(
+    model: &Model,
+    plan: &Plan,
+    c: usize,
+    t: &Taper,
+    point: &Point,
+    (state, touched, dt): (&State, &[usize], &[[f64; 6]]),
+    out: &mut [f64],
+) -> usize {
+    let mut k = 0;
+    for &j in &plan.light_pairs[c] {
+        let drate = t.rate_rows[j].map_or(0.0, |row| {
+            let contact = &model.contacts[j];
+            let [a, b] = [contact.geom_a, contact.geom_b].map(|g| model.geoms[g].body);
+            let twist = |b: usize| if b == 0 { [0.0; 6] } else { dt[b] };
+            let (ta, tb) = (twist(a), twist(b));
+            (0..6).map(|i| row[i] * ta[i] + row[6 + i] * tb[i]).sum()
+        });
+        let shift = t.shift(model, j, 0.0, drate);
+        k += t.write_pairs(model, j, shift, &mut out[k..]);
+    }
+    for &j in &plan.light_limits[c] {
+        let joint = &model.joints[j];
+        let (mut rates, mut base) = ([0.0; 6], [0.0; 6]);
+        let n = joint.limits.len();
+        limit_rates(state, joint, &mut rates[..n]);
+        limit_rates(&point.state, joint, &mut base[..n]);
+        for i in 0..n {
+            let drate = (rates[i] - base[i]) / FD_STEP;
+            k += t.write_limit_sides(model, t.limit_adr[j] + i, drate, &mut out[k..]);
+        }
+    }
+    // a tendon's rate `Σ coef q̇`, over its terms on the joints the column moves
+    let nl = t.limit_slack.len() - model.tendon_limits.len();
+    for &n in &plan.light_tendons[c] {
+        let mut drate = 0.0;
+        for &(j, dof, coef) in &model.tendon_limits[n].terms {
+            let joint = &model.joints[j];
+            if touched.contains(&joint.parent) || touched.contains(&joint.child) {
+                let rate = |s: &State| coordinate_rate(s, joint, dof);
+                drate += coef * (rate(state) - rate(&point.state)) / FD_STEP;
+            }
+        }
+        k += t.write_limit_sides(model, nl + n, drate, &mut out[k..]);
+    }
+    k
 }
 
 /// The smoothed step's κ weights at the gradient point (`solver::taper`).
@@ -658,6 +651,16 @@ impl Taper<'_> {
     fn shift(&self, model: &Model, k: usize, dphi: f64, drate: f64) -> f64 {
         let [_, by_gap, by_rate] = weight_and_slopes(model, k, self.phi_now[k], self.rate_now[k]);
         -self.kappa * (by_gap * dphi + by_rate * drate)
+    }
+
+    /// Write `-κ ∂w/∂q̇ · drate` of both sides of limit `a` (its index in `limit_slack`) to
+    /// `out[0..2]`; returns 2.
+    fn write_limit_sides(&self, model: &Model, a: usize, drate: f64, out: &mut [f64]) -> usize {
+        for (o, slack) in out.iter_mut().zip(self.limit_slack[a]) {
+            let [_, _, by_rate] = limit_weight_and_slopes(model, slack, self.limit_rate[a]);
+            *o = -self.kappa * by_rate * drate;
+        }
+        2
     }
 
     /// Write `shift` on candidate `k`'s complementarity rows (`plan::pair_rows`) from `out[0]`;

@@ -403,6 +403,8 @@ pub(super) struct Plan {
     pub(super) refresh: Option<Vec<Refresh>>,
     /// The light columns' groups (closed form, [`light_columns`]); empty column by column.
     pub(super) light_groups: Vec<Vec<usize>>,
+    /// Per light column, how many of its row ranges are body rows (the first ones).
+    pub(super) light_body_ranges: Vec<usize>,
     /// Per light column, the active candidates whose complementarity rows ([`pair_rows`])
     /// follow its body rows: those on the bodies whose twists it changes, when κ is weighted
     /// by the gap rates at the start (`solver::taper`); empty otherwise.
@@ -566,6 +568,7 @@ impl Plan {
             groups,
             refresh: Some(refresh),
             light_groups: sk.light_groups.clone(),
+            light_body_ranges: sk.light_rows.iter().map(Vec::len).collect(),
             light_pairs,
             light_limits,
             light_tendons,
@@ -588,6 +591,7 @@ impl Plan {
             groups: (0..inputs.len()).map(|c| vec![c]).collect(),
             refresh: None,
             light_groups: Vec::new(),
+            light_body_ranges: vec![0; inputs.len()],
             light_pairs: vec![Vec::new(); inputs.len()],
             light_limits: vec![Vec::new(); inputs.len()],
             light_tendons: vec![Vec::new(); inputs.len()],
