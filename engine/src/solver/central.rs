@@ -1,8 +1,7 @@
 //! The central-path point at κ of a solved step: the interior solution of the relaxed problem
 //! (each complementarity pair the step activated at `b ∘ c = κ w e`, `w` its contact
-//! candidate's or limit's taper weight, [`super::taper`]), the
-//! smoothed step of the
-//! gradients (`kappa_grad`). Started either from the step's hard solution moved onto the κ
+//! candidate's or limit's taper weight, [`super::taper`]), the smoothed step of the gradients
+//! (`kappa_grad`). Started either from the step's hard solution moved onto the κ
 //! central path pair by pair and solved by Newton's method at κ ([`Start::Hard`], [`follow`]),
 //! or from the neutral interior point by the predictor-corrector of [`super::ipm`] with
 //! centring floored at κ ([`Start::Neutral`], the fallback).

@@ -1,7 +1,7 @@
-//! κ's weight on each contact candidate in the smoothed step of the gradients (`kappa_grad`):
-//! a candidate's complementarity pairs are held at `b ∘ c = κ w e`, `w` falling smoothly from 1
-//! for a candidate touching at the step's start (within a tenth of its taper distance,
-//! [`FULL`]) to [`WEIGHT_FLOOR`] at its taper distance ([`distance`]) and beyond.
+//! κ's weight on each contact candidate and limit in the smoothed step of the gradients
+//! (`kappa_grad`): a candidate's complementarity pairs are held at `b ∘ c = κ w e`, `w` falling
+//! smoothly from 1 for a candidate touching at the step's start (within a tenth of its taper
+//! distance, [`FULL`]) to [`WEIGHT_FLOOR`] at its taper distance ([`distance`]) and beyond.
 //!
 //! Why: a candidate that joins the smoothed step pushes with `κ w / gap`. With `w = 1` the
 //! smoothed map jumped where a candidate came within the activation's reach: by `κ / gap` at
