@@ -425,3 +425,30 @@ def test_exact_jacobians_through_a_joint_limit_pressed_hard():
             fd[m.nv:, i] = (xp[nq:] - xm[nq:]) / (2 * eps)
         err = np.abs(B[m.nv:] - fd[m.nv:]).max() / np.abs(fd[m.nv:]).max()
         assert err < 1e-6, (k, err)
+
+
+@pytest.mark.parametrize("speed", [0.0, 0.4])
+def test_smoothed_step_is_continuous_where_a_contact_comes_within_reach(speed):
+    """A ball above the floor at gaps just inside and just outside the step's reach
+    (``activation_margin + h (2 u + h |g|)``): the smoothed step at kappa moves by far less than
+    the ``kappa / (gap m)`` a contact untapered would add as it joins (README: κ-smoothing)."""
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("floor", body="world", shape="plane", friction=0.5)
+    b.add_body("ball", mass=1.0, inertia=(4e-3, 4e-3, 4e-3), pos=(0, 0, 0.2))
+    b.add_joint("free", kind="floating", parent="world", child="ball")
+    b.add_geom("ball", body="ball", shape="sphere", size=(0.1,), friction=0.5)
+    m = tight(b.compile())
+    kappa, h = 1e-4, 0.01
+    reach = m.options["activation_margin"] + h * (2 * speed + h * 9.81)
+
+    def next_qvel(gap):
+        s = m.make_state(qpos=[0, 0, 0.1 + gap, 1, 0, 0, 0], qvel=[0.2, 0, -speed, 0, 0.5, 0])
+        n, _ = ukemi.step_smoothed(m, s, kappa=kappa)
+        return n.qvel
+
+    def across(k, d=1e-9):
+        return next_qvel(reach + k * d) - next_qvel(reach - k * d)
+
+    # (the map's own slope cancels between the two spans; a jump does not)
+    jump = np.abs(across(1.0) - across(3.0) / 3.0).max()
+    assert jump < 1e-4 * kappa / reach
