@@ -561,8 +561,8 @@ pub struct Workspace {
     /// impulse, `s ≥ slack_floor · γ` (matrix only; 0 but while the gradients assemble their
     /// matrix at the gradient point, see `gradients::SLACK_FLOOR`).
     pub(crate) slack_floor: f64,
-    /// Whether κ weighs each contact candidate's pairs by its gap at the step's start
-    /// (`solver::taper`): set by the smoothed step's solve (`solver::central::solve`) for the
+    /// Whether κ weighs each contact candidate's and limit's pairs by its gap (slack) and rate
+    /// at the step's start (`solver::taper`): set by the smoothed step's solve (`solver::central::solve`) for the
     /// gradients at `kappa_grad`, cleared by every hard solve (`solver::ipm::solve_to`).
     pub(crate) kappa_taper: bool,
     /// The left-out candidates' pairs modelled in the mean complementarity (none but in the

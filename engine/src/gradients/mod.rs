@@ -487,6 +487,9 @@ impl SolveLinearization {
         }
         ws.w.copy_from_slice(&stored.w);
         ws.active.copy_from_slice(&stored.active);
+        // (a recycled workspace's shadowed candidates are another step's: the smoothed step
+        // would pool them, `saturation::hold_frictionless`)
+        ws.shadowed.fill(false);
         if kappa_grad.is_some() && !model.options.smooth_every_candidate {
             // the smoothed step joins the candidates above the taper's floor that the stored
             // activation left out (`central::join_weighted`): their gaps and rates at the start

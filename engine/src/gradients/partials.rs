@@ -395,6 +395,10 @@ pub(super) fn partials(
     let (nw, ny, nz) = (w.len(), point.coords.dim(model), inputs.len());
     let eps = steps(model, inputs);
     let mut probe = Probe::new(model, point, ctrl, held, taper.as_ref().map(|t| t.kappa));
+    if let Some(t) = &taper {
+        // a held cone's first row is an equality, with no κ to weigh (as in the solve)
+        probe.ws.saturated.copy_from_slice(t.saturated);
+    }
     let nwc = 6 * (model.nbody() - 1);
     let plan = match method {
         PartialsMethod::Coloured => plan_for(model, point.coords, held.0, inputs, taper.is_some()),

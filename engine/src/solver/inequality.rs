@@ -546,7 +546,7 @@ fn violations(
         _ => true,
     };
     for_each_owned_pair(model, active, saturated, |owner, o, p, _, row, soc| {
-        let k = match written(owner) {
+        let k = match written(owner) && shifts.kappa != 0.0 {
             true => shifts.kappa * super::taper::weight(model, shifts.start, owner, o, p),
             false => 0.0,
         };

@@ -78,22 +78,25 @@ macro_rules! at_start {
 }
 pub(crate) use at_start;
 
-/// The weight at `m = gap / taper distance`: 1 up to [`FULL`], then `1 - S(t)` with
-/// `S(t) = t³ (10 - 15 t + 6 t²)` over `t = (m - FULL) / (1 - FULL)`, to the floor at `m = 1`:
-/// continuous with its first two derivatives at both ends (so central differences across
-/// them stay second-order accurate).
+/// The weight at `m = gap / taper distance`: 1 up to [`FULL`], then
+/// `floor + (1 - floor) (1 - S(t))` with `S(t) = t³ (10 - 15 t + 6 t²)` over
+/// `t = (m - FULL) / (1 - FULL)`, to the floor at `m = 1`: continuous with its first two
+/// derivatives at both ends (so central differences across them stay second-order accurate).
 pub(crate) fn weight_at(m: f64) -> f64 {
     match ramp(m) {
         None => 1.0,
-        Some(t) => (1.0 - t * t * t * (10.0 + t * (6.0 * t - 15.0))).max(WEIGHT_FLOOR),
+        Some(t) => {
+            let s = t * t * t * (10.0 + t * (6.0 * t - 15.0));
+            WEIGHT_FLOOR + (1.0 - WEIGHT_FLOOR) * (1.0 - s)
+        }
     }
 }
 
 /// `d weight_at / dm` (0 where the weight is 1 or at its floor).
 pub(crate) fn slope_at(m: f64) -> f64 {
     match ramp(m) {
-        Some(t) if weight_at(m) > WEIGHT_FLOOR => {
-            -30.0 * t * t * (1.0 - t) * (1.0 - t) / (1.0 - FULL)
+        Some(t) if t < 1.0 => {
+            -(1.0 - WEIGHT_FLOOR) * 30.0 * t * t * (1.0 - t) * (1.0 - t) / (1.0 - FULL)
         }
         _ => 0.0,
     }
@@ -130,13 +133,21 @@ pub(crate) fn distance(model: &Model, c: usize, rate: f64) -> (f64, f64) {
 /// Candidate `c`'s weight and its derivatives in the gap and in the gap rate at the start.
 pub(crate) fn weight_and_slopes(model: &Model, c: usize, phi: f64, rate: f64) -> [f64; 3] {
     let (d, dd) = distance(model, c, rate);
-    if !d.is_finite() || d <= 0.0 {
-        // (an activation margin of 0 without gravity: no room for a taper)
-        return [1.0, 0.0, 0.0];
+    if !(d > 0.0 && d.is_finite()) {
+        return no_room(d, phi);
     }
     let m = phi / d;
     let s = slope_at(m);
     [weight_at(m), s / d, -s * m * dd / d]
+}
+
+/// The weight where the taper distance `d` is infinite (every candidate and limit always
+/// active: no taper) or NaN (kept active, the solve reports it): 1; where it is zero (an
+/// activation margin of 0 without gravity: only the touching ones are within reach): 1
+/// touching, the floor apart.
+fn no_room(d: f64, gap: f64) -> [f64; 3] {
+    let apart = d <= 0.0 && gap > 0.0;
+    [if apart { WEIGHT_FLOOR } else { 1.0 }, 0.0, 0.0]
 }
 
 /// A limit side's taper distance at the rate `rate` of its coordinate and its derivative in
@@ -159,8 +170,8 @@ pub(crate) fn limit_distance(model: &Model, rate: f64) -> (f64, f64) {
 /// (the upper side's slack `hi - q` falls as `q` rises, its distance reads `|q̇|` alike).
 pub(crate) fn limit_weight_and_slopes(model: &Model, slack: f64, rate: f64) -> [f64; 3] {
     let (d, dd) = limit_distance(model, rate);
-    if !d.is_finite() || d <= 0.0 {
-        return [1.0, 0.0, 0.0];
+    if !(d > 0.0 && d.is_finite()) {
+        return no_room(d, slack);
     }
     let m = slack / d;
     let s = slope_at(m);
@@ -207,7 +218,7 @@ mod tests {
         assert_eq!(weight_at(f64::NAN), 1.0);
         assert_eq!(weight_at(FULL), 1.0);
         assert_eq!(weight_at(2.0), WEIGHT_FLOOR);
-        assert!((weight_at(0.5 * (1.0 + FULL)) - 0.5).abs() < 1e-15);
+        assert!((weight_at(0.5 * (1.0 + FULL)) - 0.5 * (1.0 + WEIGHT_FLOOR)).abs() < 1e-15);
         let slope = |m: f64| (weight_at(m + 1e-7) - weight_at(m - 1e-7)) / 2e-7;
         let curve = |m: f64| (slope(m + 1e-4) - slope(m - 1e-4)) / 2e-4;
         for end in [FULL, 1.0] {
