@@ -148,6 +148,9 @@ fn attempts(
             ws.w.copy_from_slice(&solution.w);
             ws.active.copy_from_slice(&solution.active);
             ws.saturated.copy_from_slice(&solution.saturated);
+            // and the features it ended with (`activation::refreeze_disks` may have moved one)
+            let features = solution.frozen.iter().copied();
+            crate::solver::activation::prepare_candidates_holding(model, state, ws, features);
             newton::evaluate(model, state, ws, false, 0.0);
             Ok(StoredStep::Whole(solution))
         }
