@@ -34,7 +34,7 @@ use super::activation::candidate_margin;
 pub(crate) const WEIGHT_FLOOR: f64 = 1e-6;
 
 /// Where the weight starts to fall, as a fraction of the taper distance: a candidate within a
-/// tenth of it (0.75 mm at rest with the default margin) weighs 1.
+/// tenth of it (0.82 mm at rest with the default margin and h = 0.01 s) weighs 1.
 ///
 /// Why not 0: resting contacts sit at gaps of ~1e-11 m, and a weight whose second derivative
 /// jumps there (as it must at the start of any taper) put the finite differences of every
