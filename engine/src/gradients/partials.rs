@@ -608,13 +608,14 @@ fn weight_rows(
     }
     for &j in &plan.light_limits[c] {
         let joint = &model.joints[j];
-        let (mut rates, mut base) = ([0.0; 6], [0.0; 6]);
+        let mut rates = [0.0; 6];
         let n = joint.limits.len();
         limit_rates(state, joint, &mut rates[..n]);
-        limit_rates(&point.state, joint, &mut base[..n]);
-        for i in 0..n {
-            let drate = (rates[i] - base[i]) / FD_STEP;
-            k += t.write_limit_sides(model, t.limit_adr[j] + i, drate, &mut out[k..]);
+        // (against the rates the step recorded at the gradient point, `t.limit_rate`)
+        for (i, rate) in rates[..n].iter().enumerate() {
+            let a = t.limit_adr[j] + i;
+            let drate = (rate - t.limit_rate[a]) / FD_STEP;
+            k += t.write_limit_sides(model, a, drate, &mut out[k..]);
         }
     }
     // a tendon's rate `Σ coef q̇`, over its terms on the joints the column moves
