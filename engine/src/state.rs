@@ -44,15 +44,7 @@ pub struct State {
 impl State {
     /// Bytes of the state's arrays (what keeping it costs).
     pub(crate) fn heap_bytes(&self) -> usize {
-        let lens = [
-            &self.com_pos,
-            &self.quat,
-            &self.com_linvel,
-            &self.angvel_b,
-            &self.joint_impulse,
-            &self.ineq_vars,
-        ];
-        8 * lens.iter().map(|v| v.len()).sum::<usize>()
+        8 * self.parts().iter().map(|v| v.len()).sum::<usize>()
     }
 
     /// The length of the interval of the state's velocities ([`State::interval`]) when stepped
@@ -118,6 +110,77 @@ impl State {
             s.set_pose(b, &body.ref_pose);
         }
         s
+    }
+
+    /// Every number of the state in one flat vector, which [`State::from_snapshot`] turns back
+    /// into the same state bit for bit: `[time, interval, com_pos, quat, com_linvel, angvel_b,
+    /// joint_impulse, ineq_vars]` (the interval NaN when unset). Unlike `[qpos, qvel]` it
+    /// keeps the solver's warm start, so a step from the restored state takes the same
+    /// iterates: a checkpoint of a run, or a hard step kept as a test fixture.
+    pub fn snapshot(&self) -> Vec<f64> {
+        let mut out = Vec::with_capacity(2 + self.heap_bytes() / 8);
+        out.extend([self.time, self.interval.unwrap_or(f64::NAN)]);
+        for part in self.parts() {
+            out.extend_from_slice(part);
+        }
+        out
+    }
+
+    /// The state of `model` that [`State::snapshot`] wrote; the snapshot's length must be the
+    /// one `model`'s states have, and its interval NaN or in (0, 1].
+    pub fn from_snapshot(model: &Model, values: &[f64]) -> crate::Result<State> {
+        let mut s = State::reference(model);
+        let len = 2 + s.heap_bytes() / 8;
+        crate::ensure!(
+            values.len() == len,
+            crate::Error::Shape {
+                name: "snapshot".into(),
+                expected: vec![len],
+                got: vec![values.len()],
+            }
+        );
+        let interval = values[1];
+        crate::ensure!(
+            interval.is_nan() || (interval > 0.0 && interval <= 1.0),
+            crate::Error::InvalidInput {
+                field: "snapshot[1] (interval)".into(),
+                value: interval.to_string(),
+                reason: "must be NaN (unset) or in (0, 1]".into(),
+            }
+        );
+        s.time = values[0];
+        s.interval = (!interval.is_nan()).then_some(interval);
+        let mut rest = &values[2..];
+        for part in s.parts_mut() {
+            let (head, tail) = rest.split_at(part.len());
+            part.copy_from_slice(head);
+            rest = tail;
+        }
+        Ok(s)
+    }
+
+    /// The state's arrays, in [`State::snapshot`]'s order.
+    fn parts(&self) -> [&Vec<f64>; 6] {
+        [
+            &self.com_pos,
+            &self.quat,
+            &self.com_linvel,
+            &self.angvel_b,
+            &self.joint_impulse,
+            &self.ineq_vars,
+        ]
+    }
+
+    /// [`State::parts`], mutable.
+    fn parts_mut(&mut self) -> [&mut Vec<f64>; 6] {
+        [
+            &mut self.com_pos,
+            &mut self.quat,
+            &mut self.com_linvel,
+            &mut self.angvel_b,
+            &mut self.joint_impulse,
+            &mut self.ineq_vars,
+        ]
     }
 
     /// This state's motion (poses, velocities, joint impulses, time) as a state of `model`, a
@@ -447,6 +510,10 @@ pub struct Workspace {
     /// The friction holds (`saturated`) of the acceptable iterate in `w_acceptable` kept by a
     /// failed attempt: restored with it (the retries release and reset holds).
     pub(crate) saturated_acceptable: Vec<Option<crate::solver::saturation::Hold>>,
+    /// A converged solve's iterate and activation, kept while a missed-contact round solves
+    /// the step again with more candidates (`newton::restart_from_solution`).
+    pub(crate) w_solved: Vec<f64>,
+    pub(crate) active_solved: Vec<bool>,
     pub(crate) w_trial: Vec<f64>,
     pub(crate) residual: Vec<f64>,
     /// The last `newton::evaluate_kept` (boxed: a workspace is moved around by value).
@@ -764,6 +831,7 @@ impl Workspace {
                 &mut self.w,
                 &mut self.w_trial,
                 &mut self.w_acceptable,
+                &mut self.w_solved,
                 &mut self.residual,
             ] {
                 v.fill(f64::NAN);
@@ -888,6 +956,11 @@ impl Workspace {
             limit_rate_now: vec![0.0; nlim + model.tendon_limits.len()],
             saturated: vec![None; model.ncontact()],
             saturated_acceptable: vec![None; model.ncontact()],
+            w_solved: vec![0.0; n],
+            active_solved: vec![
+                false;
+                model.ncontact() + model.njoint() + model.tendon_limits.len()
+            ],
             blocking: vec![false; model.ncontact() + model.joints.len()],
             shadowed: vec![false; model.ncontact()],
             matrix: BlockMatrix::new(&t.pattern),
@@ -958,5 +1031,38 @@ mod tests {
             let pooled = stepped(state, &mut Recycled::new(Workspace::pooled(&model)));
             assert_eq!(pooled, fresh);
         }
+    }
+
+    /// A snapshot restores the state bit for bit, warm start and sub-step interval included,
+    /// so the step from it is the original's; a snapshot of the wrong length or with a bad
+    /// interval is refused by name.
+    #[test]
+    fn a_snapshot_restores_the_state_and_its_next_step_bit_for_bit() {
+        let model = crate::gradients::test_scenes::box_on_floor(0.01, 0.5);
+        let mut state = State::reference(&model);
+        let (v, w) = (Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 0.0, 3.0));
+        state.set_velocity(1, &v, &w);
+        let mut ws = Workspace::new(&model);
+        for _ in 0..3 {
+            crate::step(&model, &mut state, &mut ws, &[]).unwrap();
+        }
+        state.interval = Some(0.25);
+        let restored = State::from_snapshot(&model, &state.snapshot()).unwrap();
+        assert_eq!(restored, state);
+        let (mut a, mut b) = (state.clone(), restored);
+        crate::step(&model, &mut a, &mut Workspace::new(&model), &[]).unwrap();
+        crate::step(&model, &mut b, &mut Workspace::new(&model), &[]).unwrap();
+        let bits = |s: &State| s.snapshot().iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a), bits(&b));
+        let mut short = state.snapshot();
+        short.pop();
+        let err = State::from_snapshot(&model, &short)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("snapshot"), "{err}");
+        let mut bad = state.snapshot();
+        bad[1] = 2.0;
+        let err = State::from_snapshot(&model, &bad).unwrap_err().to_string();
+        assert!(err.contains("interval") && err.contains('2'), "{err}");
     }
 }

@@ -9,43 +9,24 @@ use ukemi_engine::{
     Coordinates, Linearization, Model, State, Workspace, Wrt, qpos, qvel, set_minimal, step,
 };
 
-/// The shared humanoid (or `None` without `../shared`) after `steps` steps of `step_bench`'s
-/// controls of `seed`, each converged, and the controls of the next step. The trajectory is
-/// taken with the warm-start widening these steps were found with (`warm_start_widening`
-/// 1e-3, the default until session 29: a solver change moves a chaotic trajectory's later
-/// states); the returned model has the default options.
-fn replay(seed: u64, steps: usize) -> Option<(Model, State, Vec<f64>)> {
-    replay_with(seed, steps, as_found)
-}
-
-/// [`replay`] with the trajectory taken under `found(model)`'s options.
-fn replay_with(
-    seed: u64,
-    steps: usize,
-    found: impl Fn(&Model) -> Model,
-) -> Option<(Model, State, Vec<f64>)> {
-    replay_robot("humanoid", seed, steps, found)
-}
-
-/// [`replay_with`] on the shared robot `name`.
-fn replay_robot(
-    name: &str,
-    seed: u64,
-    steps: usize,
-    found: impl Fn(&Model) -> Model,
-) -> Option<(Model, State, Vec<f64>)> {
-    let model = workload::shared(name)?;
-    let found = found(&model);
-    let mut state = workload::start_state(&model);
-    let mut ws = Workspace::new(&model);
-    let mut controls = workload::Controls::with_seed(seed);
-    for _ in 0..steps {
-        let u = controls.next(&model);
-        let report = step(&found, &mut state, &mut ws, &u).unwrap();
-        assert!(report.status.is_success());
-    }
-    let u = controls.next(&model);
-    Some((model, state, u))
+/// The hard step kept in `tests/fixtures/NAME.txt` (written by `examples/snapshot_step.rs`
+/// from the trajectory that found it): the shared robot's model with the default options (or
+/// `None` without `../shared`), the state before the step bit for bit (warm start included),
+/// and the step's controls. Kept as snapshots, not replayed: a solver change moves a chaotic
+/// trajectory's later states, and the replayed step was then no longer the hard one.
+fn fixture(name: &str) -> Option<(Model, State, Vec<f64>)> {
+    let path = format!("{}/tests/fixtures/{name}.txt", env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let field = |key: &str| {
+        let line = text.lines().find_map(|l| l.strip_prefix(key)).unwrap();
+        line.split_whitespace()
+            .map(str::to_owned)
+            .collect::<Vec<_>>()
+    };
+    let model = workload::shared(&field("robot ")[0])?;
+    let numbers = |key| -> Vec<f64> { field(key).iter().map(|x| x.parse().unwrap()).collect() };
+    let state = State::from_snapshot(&model, &numbers("state ")).unwrap();
+    Some((model, state, numbers("ctrl ")))
 }
 
 /// `model` with the options of the sessions that found these steps (`warm_start_widening`
@@ -103,7 +84,7 @@ fn assert_no_penetration(model: &Model, state: &State) {
 /// the step failed; with every candidate active from the start it converges in ~20 iterations.
 #[test]
 fn a_wedged_humanoid_step_converges() {
-    let Some((model, state, u)) = replay(2, 143) else {
+    let Some((model, state, u)) = fixture("humanoid_seed2_step143") else {
         return;
     };
     // its Jacobians (minimal coordinates rebuild the same start and solve it the same way)
@@ -132,7 +113,7 @@ fn a_wedged_humanoid_step_converges() {
 /// Either way the gradients' forward pass decides the same way.
 #[test]
 fn a_folded_leg_step_converges() {
-    let Some((model, start, u)) = replay(13, 127) else {
+    let Some((model, start, u)) = fixture("humanoid_seed13_step127") else {
         return;
     };
     let off = pyramid_off(&model);
@@ -158,7 +139,7 @@ fn a_folded_leg_step_converges() {
 /// rebuilt state lands.
 #[test]
 fn a_jammed_exact_start_is_stepped_from_its_rebuilt_state() {
-    let Some((model, mut state, u)) = replay(97, 53) else {
+    let Some((model, mut state, u)) = fixture("humanoid_seed97_step53") else {
         return;
     };
     let model = as_found(&model);
@@ -180,7 +161,7 @@ fn a_jammed_exact_start_is_stepped_from_its_rebuilt_state() {
 /// is retried so before anything else.
 #[test]
 fn a_wedged_limb_retries_its_first_attempt_widened_gently() {
-    let Some((model, mut state, u)) = replay(2, 143) else {
+    let Some((model, mut state, u)) = fixture("humanoid_seed2_step143") else {
         return;
     };
     let report = step(&model, &mut state, &mut Workspace::new(&model), &u).unwrap();
@@ -197,12 +178,13 @@ fn a_wedged_limb_retries_its_first_attempt_widened_gently() {
 /// `step_jacobians` takes the same decisions and lands on the same root, and the exact cones
 /// take the steps after it.
 fn jammed_step_converges_from_the_pyramids_impulses(seed: u64, at: usize) {
-    let Some((model, start, u)) = replay_with(seed, at, Model::clone) else {
+    let Some((model, start, u)) = fixture(&format!("humanoid_seed{seed}_step{at}")) else {
         return;
     };
     use ukemi_engine::SolveStatus;
     // the jam: without the pyramid the step fails (should this start converging, the solver has
-    // outgrown this state: find another with `step_bench humanoid.xml 1000 1 SEED`)
+    // outgrown this state: find another with `step_bench humanoid.xml 1000 1 SEED` and keep
+    // it with `snapshot_step`)
     let off = pyramid_off(&model);
     let mut failed = start.clone();
     let report = step(&off, &mut failed, &mut Workspace::new(&off), &u).unwrap();
@@ -251,7 +233,7 @@ fn a_step_that_jams_the_pyramid_too_converges_from_its_last_iterate() {
 /// steps after it converge) without gradients (`step_jacobians` reports it unconverged).
 #[test]
 fn a_step_the_exact_cones_cannot_take_is_the_pyramids() {
-    let Some((model, start, u)) = replay_robot("panda", 371, 159, Model::clone) else {
+    let Some((model, start, u)) = fixture("panda_seed371_step159") else {
         return;
     };
     use ukemi_engine::SolveStatus;

@@ -148,18 +148,53 @@ fn v3(x: &[f64], i: usize) -> Vector3<f64> {
 /// Cold start: the neutral point (γ = s = 1, ξ = η = e). Warm start: the previous step's values
 /// (stored in `state`) pushed at least `warm_start_margin` inside their cones.
 pub(crate) fn initialize(model: &Model, state: &State, ws: &mut Workspace, warm: bool) {
+    initialize_from(model, state, ws, warm, WarmFrom::State);
+}
+
+/// Where [`initialize_from`] takes a warm start's inequality variables.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum WarmFrom {
+    /// The state's (the previous step's solution).
+    State,
+    /// The converged iterate kept in `ws.w_solved` for the pairs active there
+    /// (`ws.active_solved`), the state's for the others.
+    Solution,
+}
+
+/// [`initialize`] with the warm start taken from `from`.
+pub(crate) fn initialize_from(
+    model: &Model,
+    state: &State,
+    ws: &mut Workspace,
+    warm: bool,
+    from: WarmFrom,
+) {
     let t = &model.topology;
     let mut k = 0;
+    let nc = model.ncontact();
+    let owners = (0..nc)
+        .map(Some)
+        .chain(
+            t.limit_node
+                .iter()
+                .enumerate()
+                .map(|(j, n)| n.map(|_| nc + j)),
+        )
+        .chain((0..t.tendon_node.len()).map(|i| Some(nc + model.njoint() + i)))
+        .flatten();
     let nodes = t
         .contact_node
         .iter()
         .chain(t.limit_node.iter().flatten())
         .chain(&t.tendon_node)
         .map(|&n| (n, t.pattern.dim(n)));
-    for (n, dim) in nodes {
+    for ((n, dim), owner) in nodes.zip(owners) {
         let o = t.pattern.offset(n);
-        let prev = &state.ineq_vars[k..k + dim];
-        ws.w[o..o + dim].copy_from_slice(prev);
+        if from == WarmFrom::Solution && ws.active_solved[owner] {
+            ws.w[o..o + dim].copy_from_slice(&ws.w_solved[o..o + dim]);
+        } else {
+            ws.w[o..o + dim].copy_from_slice(&state.ineq_vars[k..k + dim]);
+        }
         k += dim;
     }
     let margin = model.options.warm_start_margin;
