@@ -100,9 +100,11 @@ fn lu_column(a: &mut [f64], n: usize, c: usize, piv: &mut [usize]) -> bool {
     swap_rows(a, n, c, p);
     let (top, bottom) = a.split_at_mut((c + 1) * n);
     let row_c = &top[c * n..];
+    // (one division a column: multiplying by the reciprocal, the rows' multipliers need none)
+    let inv = 1.0 / pivot;
     for row_r in bottom[..(n - c - 1) * n].chunks_exact_mut(n) {
         // l_rc = a_rc / u_cc;  a_r,c+1.. -= l_rc * u_c,c+1..
-        let l = row_r[c] / pivot;
+        let l = row_r[c] * inv;
         row_r[c] = l;
         if l != 0.0 {
             axpy_neg(&mut row_r[c + 1..], l, &row_c[c + 1..n]);
@@ -162,10 +164,12 @@ fn lu_solve_sized(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
         let s: f64 = (0..i).map(|k| lu[i * n + k] * b[k]).sum();
         b[i] -= s;
     }
-    // U x = y (backward)
+    // U x = y (backward; the pivots' reciprocals depend on `lu` alone, so their divisions
+    // stay off the substitution's chain of dependent operations)
     for i in (0..n).rev() {
+        let inv = 1.0 / lu[i * n + i];
         let s: f64 = (i + 1..n).map(|k| lu[i * n + k] * b[k]).sum();
-        b[i] = (b[i] - s) / lu[i * n + i];
+        b[i] = (b[i] - s) * inv;
     }
 }
 
@@ -179,8 +183,9 @@ fn lu_solve_transpose_sized(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) 
     let (lu, b) = (&lu[..n * n], &mut b[..n]);
     // Aᵀ = Uᵀ Lᵀ P;  Uᵀ w = b (forward)
     for i in 0..n {
+        let inv = 1.0 / lu[i * n + i];
         let s: f64 = (0..i).map(|k| lu[k * n + i] * b[k]).sum();
-        b[i] = (b[i] - s) / lu[i * n + i];
+        b[i] = (b[i] - s) * inv;
     }
     // Lᵀ v = w (backward, unit diagonal)
     for i in (0..n).rev() {
@@ -234,9 +239,9 @@ fn lu_solve_transpose_left_matrix_sized(
                     *a += u * v;
                 }
             }
-            let d = lu[i * n + i];
+            let inv = 1.0 / lu[i * n + i];
             for (v, a) in x[col(i)].iter_mut().zip(&acc) {
-                *v = (*v - a) / d;
+                *v = (*v - a) * inv;
             }
         }
         // Lᵀ V = W (backward, unit diagonal): x_i -= Σ_{k>i} l_ki x_k
