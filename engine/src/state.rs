@@ -642,6 +642,10 @@ pub struct Workspace {
     /// gentle `ipm::WIDEN_IMPULSE_GENTLE` instead of `Options::warm_start_widening`
     /// (`newton::solve_active`).
     pub(crate) gentle_widening: bool,
+    /// Set while a missed-contact round solves the step again from the converged solution
+    /// (`newton::restart_from_solution`): a warm start too, widened when its first predictor
+    /// is cut as a first attempt's is. The next interior-point solve takes (clears) it.
+    pub(crate) resumed: bool,
     /// Whether the last interior-point attempt widened its warm start.
     pub(crate) widened: bool,
     /// Set while a sub-step of a subdivided step is solved (`step::attempt`): its warm start,
@@ -998,6 +1002,7 @@ impl Workspace {
             far: Default::default(),
             every_candidate: false,
             gentle_widening: false,
+            resumed: false,
             widened: false,
             substep: false,
         }

@@ -152,6 +152,8 @@ pub(crate) fn solve_to(
     }
     ws.nt.fill(None);
     ws.widened = false;
+    // (this solve's only: a retry of it starts cold)
+    let resumed = std::mem::take(&mut ws.resumed);
     // friction of candidates apart, held at zero while they stay apart (hard solves only: the
     // central path gives every candidate its friction)
     super::saturation::release_separated(ws);
@@ -281,7 +283,7 @@ pub(crate) fn solve_to(
         let act = &ws.active;
         let alpha_aff = cone_search(model, act, &ws.saturated, &ws.w, &ws.delta_aff, 1.0, 1.0);
         if it == 0
-            && ws.first_attempt()
+            && (ws.first_attempt() || resumed)
             && central.is_none()
             && o.warm_start
             && alpha_aff < WIDEN_BELOW

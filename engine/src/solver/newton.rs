@@ -810,6 +810,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
         let iterations = report.iterations;
         ws.attempt = ws.attempt.saturating_add(1);
         restart_from_solution(model, state, ws);
+        ws.resumed = true;
         report = solve_active(model, state, ws, RETRIES);
         report.iterations += iterations;
     }
@@ -844,9 +845,12 @@ fn restart_warm(model: &Model, state: &State, ws: &mut Workspace) {
 /// joint impulses and the variables of the pairs that took part (`ws.w_solved`,
 /// `ws.active_solved`) as the warm start, the pairs just activated warm-started from the state
 /// as [`restart_warm`] starts them. The warm-start rules (interior margin, slip of fresh
-/// cones) apply to both. Restarted from the state instead, such a round took ~25 iterations
-/// on the A1 and ~30 on the humanoid, from the solution ~12 and ~5 (`step_bench MODEL 1000 1
-/// SEED`, seeds 1-3).
+/// cones) apply to both, and a first predictor cut short widens it as it widens a first
+/// attempt (`Workspace::resumed`): the converged pairs sit at complementarity ~1e-11, and
+/// where the new pair's residual moves them the iterates jammed at step lengths 1e-2..1e-8
+/// until the cold retry. A1, `step_bench a1.xml 1000 1 SEED`, seeds 1-3, iterations of the
+/// rounds: restarted from the state ~25 a round; from the solution ~14 (bimodal: 2-5, or
+/// ~33 through the cold retry); widened too ~6.
 fn restart_from_solution(model: &Model, state: &State, ws: &mut Workspace) {
     let t = &model.topology;
     for b in 1..model.nbody() {
