@@ -686,6 +686,17 @@ impl PyModel {
         Ok(state)
     }
 
+    /// The state `state.snapshot()` wrote, for this model (a snapshot of another model's state
+    /// has another length and is refused).
+    fn state_from_snapshot(&self, snapshot: Vec<f64>) -> PyResult<PyState> {
+        guard(|| {
+            Ok(PyState {
+                model: self.inner.clone(),
+                inner: State::from_snapshot(&self.inner, &snapshot).py()?,
+            })
+        })
+    }
+
     fn __repr__(&self) -> String {
         let m = &self.inner;
         format!(

@@ -101,6 +101,13 @@ impl PyState {
     fn energy(&self) -> f64 {
         ukemi_engine::mechanics::total_energy(&self.model, &self.inner)
     }
+    /// Every number of the state, warm start included, as one float64 array that
+    /// `model.state_from_snapshot` turns back into this state bit for bit: a checkpoint from
+    /// which a step repeats exactly what it would have done (`qpos`, `qvel` alone lose the
+    /// solver's warm start).
+    fn snapshot<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.snapshot())
+    }
     /// An independent copy.
     fn copy(&self) -> PyState {
         self.clone()
