@@ -372,7 +372,7 @@ def test_a_snapshot_restores_a_state_and_its_future_bit_for_bit():
     with pytest.raises(ValueError, match="snapshot"):
         ukemi.models.pendulum().state_from_snapshot(snap)
     bad = snap.copy()
-    bad[1] = 3.0
+    bad[1] = -3.0
     with pytest.raises(ValueError, match="interval"):
         m.state_from_snapshot(bad)
     with pytest.raises(TypeError, match="snapshot"):

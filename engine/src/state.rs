@@ -127,7 +127,7 @@ impl State {
     }
 
     /// The state of `model` that [`State::snapshot`] wrote; the snapshot's length must be the
-    /// one `model`'s states have, and its interval NaN or in (0, 1].
+    /// one `model`'s states have, and its interval NaN or positive and finite.
     pub fn from_snapshot(model: &Model, values: &[f64]) -> crate::Result<State> {
         let mut s = State::reference(model);
         let len = 2 + s.heap_bytes() / 8;
@@ -141,11 +141,11 @@ impl State {
         );
         let interval = values[1];
         crate::ensure!(
-            interval.is_nan() || (interval > 0.0 && interval <= 1.0),
+            interval.is_nan() || (interval > 0.0 && interval.is_finite()),
             crate::Error::InvalidInput {
                 field: "snapshot[1] (interval)".into(),
                 value: interval.to_string(),
-                reason: "must be NaN (unset) or in (0, 1]".into(),
+                reason: "must be NaN (unset) or positive and finite".into(),
             }
         );
         s.time = values[0];
@@ -803,6 +803,7 @@ impl Workspace {
         self.trace_condition = false;
         self.attempt = 0;
         self.gentle_widening = false;
+        self.resumed = false;
         self.widened = false;
         self.substep = false;
         self.kept.valid = false;
@@ -1066,8 +1067,8 @@ mod tests {
             .to_string();
         assert!(err.contains("snapshot"), "{err}");
         let mut bad = state.snapshot();
-        bad[1] = 2.0;
+        bad[1] = -2.0;
         let err = State::from_snapshot(&model, &bad).unwrap_err().to_string();
-        assert!(err.contains("interval") && err.contains('2'), "{err}");
+        assert!(err.contains("interval") && err.contains("-2"), "{err}");
     }
 }
