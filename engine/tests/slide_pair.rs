@@ -14,6 +14,11 @@ use ukemi_engine::{
 /// 1 × 2 × 1 cm one on the sliding finger (its corners well inside the other's face: pads of
 /// one size put the corners on the face's edges, where the feature switches).
 fn gripper(drop: bool) -> Model {
+    gripper_limited(drop, None)
+}
+
+/// [`gripper`] with its slide limited to `range` (m; the pads' gap is `0.03 + q`).
+fn gripper_limited(drop: bool, range: Option<(f64, f64)>) -> Model {
     let pad = |name: &str, body: &str, half: [f64; 3]| {
         GeomSpec::new(
             name,
@@ -37,13 +42,14 @@ fn gripper(drop: bool) -> Model {
             "hand",
         ))
         .joint(JointSpec::new("weld", JointKind::Fixed, "hand", "fixed"))
-        .joint(
-            JointSpec::new("slide", JointKind::Prismatic, "hand", "sliding")
+        .joint(JointSpec {
+            range: range.map(|r| vec![r]),
+            ..JointSpec::new("slide", JointKind::Prismatic, "hand", "sliding")
                 .axis([0.0, 1.0, 0.0])
                 .anchors([0.0, 0.05, 0.0], [0.0; 3])
                 .stiffness(100.0)
-                .spring_ref(vec![-0.05]),
-        )
+                .spring_ref(vec![-0.05])
+        })
         .geom(pad("pad_fixed", "fixed", [0.01; 3]))
         .geom(pad("pad_sliding", "sliding", [0.005, 0.01, 0.005]))
         .compile()
@@ -123,5 +129,38 @@ fn jacobians_with_pads_held_frictionless_match_finite_differences() {
     ] {
         let err = grad_check::check(&m, &s, &[], coords, kappa, tol);
         eprintln!("{coords:?} kappa {kappa:?}: max rel err {err:e}");
+    }
+}
+
+/// A finger slammed shut at 2 m/s with its pad 3 cm from the other: the step's approach term
+/// (`2 h u` = 4 cm) reaches the pads, but a slide limit 5 mm ahead stops the finger 2.5 cm
+/// short (its spring then holds it there), and the pads' candidates stay out of the step
+/// (`activation::slide_room`). With the limit 4 cm ahead they take part, and the pads meet
+/// without sinking into each other.
+#[test]
+fn a_finger_limit_keeps_unreachable_pads_out_of_the_step() {
+    for (lower, reachable) in [(-0.005, false), (-0.04, true)] {
+        let m = gripper_limited(true, Some((lower, 0.1)));
+        let mut s = State::reference(&m);
+        set_minimal(&m, &mut s, &[0.0, 0.0], &[0.0, -2.0]).unwrap();
+        let mut ws = Workspace::new(&m);
+        let r = step(&m, &mut s, &mut ws, &[]).unwrap();
+        assert!(r.status.is_success(), "{r:?}");
+        assert_eq!(ws.active_contacts() > 0, reachable, "lower limit {lower}");
+        // the rest of the closing: every step converges and the pads never sink
+        for k in 0..30 {
+            let r = step(&m, &mut s, &mut ws, &[]).unwrap();
+            assert!(r.status.is_success(), "step {k}: {r:?}");
+            let gap = ukemi_engine::contact::signed_distances(&m, &s)
+                .into_iter()
+                .fold(f64::INFINITY, f64::min);
+            assert!(gap > -1e-8, "step {k}: gap {gap:e}");
+            if !reachable {
+                assert!(
+                    gap > 0.02,
+                    "step {k}: the limit stops the pads 2.5 cm apart, {gap}"
+                );
+            }
+        }
     }
 }

@@ -128,6 +128,9 @@ pub struct Contact {
     /// A candidate whose normal is this axis cannot slip, and the solver holds its friction at
     /// zero.
     pub slide_axes: Option<[Vector3<f64>; 2]>,
+    /// Of a slide pair whose slides are all limited: the limits bounding its relative travel
+    /// (`slide_pair::slide_limits`), shared by the pair's candidates.
+    pub slide_limits: Option<std::sync::Arc<[(usize, usize, f64)]>>,
 }
 
 impl Contact {

@@ -55,6 +55,42 @@ pub fn slide_axis(joints: &[Joint], a: usize, b: usize) -> Option<[Vector3<f64>;
     Some([frames[0].transpose() * axis, frames[1].transpose() * axis])
 }
 
+/// The joint limits that bound how far the bodies `a` and `b` of a slide pair ([`slide_axis`])
+/// can move along their axis: `(joint, limit, coef)` per slide on the two tree paths, such that
+/// `b` moves relative to `a` along the axis by `Σ coef Δq` (`q` the slide's limited
+/// coordinate, `joint.limits[limit]`); `None` when a translation on the paths is unlimited or
+/// the bodies are not a slide pair. (A parallel gripper's closing fingers stop at their
+/// limits: the activation bounds how far a candidate between them can close in a step by the
+/// travel left, `solver::activation::activate`.)
+pub fn slide_limits(joints: &[Joint], a: usize, b: usize) -> Option<Vec<(usize, usize, f64)>> {
+    slide_axis(joints, a, b)?;
+    let (path_a, path_b) = (tree_path(joints, a)?, tree_path(joints, b)?);
+    let common = *path_a.iter().find(|x| path_b.contains(x))?;
+    let mut axis: Option<Vector3<f64>> = None;
+    let mut out = Vec::new();
+    for (sign, path) in [(-1.0, &path_a), (1.0, &path_b)] {
+        let below: Vec<usize> = path.iter().take_while(|&&x| x != common).copied().collect();
+        let mut rot = Matrix3::identity();
+        for &child in below.iter().rev() {
+            let ji = joints.iter().position(|j| j.child == child && !j.is_loop)?;
+            let joint = &joints[ji];
+            rot *= quat::rotation(&joint.offset);
+            if joint.ntrans == 0 {
+                continue;
+            }
+            // one slide, limited (its free dof 0 is its only coordinate)
+            if joint.ntrans > 1 || joint.nq() != 1 {
+                return None;
+            }
+            let limit = joint.limits.iter().position(|&(dof, _, _)| dof == 0)?;
+            let t = rot * joint.trans_basis.column(0).into_owned();
+            let ax = *axis.get_or_insert_with(|| t.normalize());
+            out.push((ji, limit, sign * t.dot(&ax)));
+        }
+    }
+    Some(out)
+}
+
 /// Largest `|a × t|` of two unit axes that count as parallel.
 const PARALLEL: f64 = 1e-9;
 
@@ -80,6 +116,50 @@ fn tree_path(joints: &[Joint], mut x: usize) -> Option<Vec<usize>> {
 mod tests {
     use super::*;
     use crate::{BodySpec, JointKind, JointSpec, ModelBuilder};
+
+    /// [`gripper`] with the fingers' slides limited to `range` (`None`: the second unlimited).
+    fn limited_gripper(range: (f64, f64), second: Option<(f64, f64)>) -> crate::Model {
+        let mut b = ModelBuilder::new();
+        b.add_body(BodySpec::new("hand", 1.0, [0.1; 3]));
+        b.add_body(BodySpec::new("f1", 0.1, [0.01; 3]));
+        b.add_body(BodySpec::new("f2", 0.1, [0.01; 3]).quat([0.0, 0.0, 0.0, 1.0]));
+        b.add_joint(JointSpec::new(
+            "wrist",
+            JointKind::Revolute,
+            "world",
+            "hand",
+        ));
+        for (f, r) in [("f1", Some(range)), ("f2", second)] {
+            let mut j = JointSpec::new(&format!("s{f}"), JointKind::Prismatic, "hand", f)
+                .axis([0.0, 1.0, 0.0]);
+            j.range = r.map(|r| vec![r]);
+            b.add_joint(j);
+        }
+        b.compile().unwrap()
+    }
+
+    /// The second finger, turned half a turn, slides along the hand's -y as its coordinate
+    /// grows, the first along +y: each coordinate's growth moves the second finger relative to
+    /// the first by -1 along the first's axis. An unlimited slide leaves the travel unbounded,
+    /// and a turning joint on the way has no slide axis at all.
+    #[test]
+    fn a_limited_gripper_bounds_its_fingers_relative_travel() {
+        let m = limited_gripper((0.0, 0.04), Some((0.0, 0.04)));
+        let limits = slide_limits(&m.joints, 2, 3).expect("both slides limited");
+        assert_eq!(limits.len(), 2);
+        for (&(j, limit, coef), name) in limits.iter().zip(["sf1", "sf2"]) {
+            assert_eq!(m.joints[j].name, name);
+            assert_eq!(limit, 0);
+            assert!((coef + 1.0).abs() < 1e-12, "{name}: {coef}");
+        }
+        // the first finger against its hand: +1
+        let hand = slide_limits(&m.joints, 1, 2).expect("one limited slide");
+        assert_eq!(hand.len(), 1);
+        assert!((hand[0].2 - 1.0).abs() < 1e-12, "{hand:?}");
+        let m = limited_gripper((0.0, 0.04), None);
+        assert!(slide_limits(&m.joints, 2, 3).is_none());
+        assert!(slide_limits(&m.joints, 0, 2).is_none(), "the wrist turns");
+    }
 
     /// A hand hinged to the world with two fingers sliding on it; `axes` are the fingers'
     /// slide axes (in their own frames) and `quat` the second finger's orientation.

@@ -581,6 +581,9 @@ impl ModelBuilder {
                         .map(|[ax, bx]| {
                             [geoms[a].rot.transpose() * ax, geoms[b].rot.transpose() * bx]
                         });
+                let slide_limits =
+                    crate::contact::slide_pair::slide_limits(joints, geoms[a].body, geoms[b].body)
+                        .map(std::sync::Arc::from);
                 out.extend(features.into_iter().map(|feature| Contact {
                     geom_a: a,
                     geom_b: b,
@@ -588,6 +591,7 @@ impl ModelBuilder {
                     model,
                     friction,
                     slide_axes,
+                    slide_limits: slide_limits.clone(),
                 }));
             }
         }

@@ -156,7 +156,10 @@ pub struct Options {
     /// A solve that fails with candidates left out is solved again with all of them active.
     /// A pair with a geom smaller than the margin uses that geom's bounding radius instead
     /// (the smaller geom's; `solver::activation::candidate_margin`: fingertip pads are not
-    /// activated at several times their own size). Of a box's corners against a plane or
+    /// activated at several times their own size). Between two bodies that can only slide
+    /// along one axis relative to each other, every slide on the way limited (a parallel
+    /// gripper's fingers), `2 h u` is at most the travel the limits leave in the direction they
+    /// move (`solver::activation::slide_room`). Of a box's corners against a plane or
     /// another box, those more than half the margin (plus twice the step's travel at the
     /// difference of their approach rates) above the lowest corner are left out too
     /// (`solver::activation::LOWEST_OF`): the lowest touches first.
