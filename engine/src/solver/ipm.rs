@@ -92,6 +92,15 @@ const SHORT_STEP: f64 = 1e-3;
 /// iterations (−9.1%), A1 115860 → 106047 (−8.5%), Panda 59480 → 56183 (−5.5%), X2 45324 →
 /// 45414; Table V's controls −8.3%, −9.3%, −0.7%, −0.7%; the 1000 stress scenes × 300 steps
 /// 684673 → 696649 (+1.7%), none failing.
+///
+/// Session 38: the second predictor too, when the first did not widen. A first step that went
+/// far (the Panda's pad struck into the floor, `step_bench panda.xml 1000 1` step 149: α =
+/// 0.79) can leave the pairs of a contact changing state next to their boundaries with the
+/// residual still large (0.39 against μ = 9e-6), and the iterations after it crawled at α ~
+/// 1e-2 until the stall test. Same states (`option_ab MODEL 1000 SEED` with a temporary
+/// switch), iterations: Panda seeds 1-3 −4.7%, −4.7%, −6.5%; A1 seeds 1-5 −4.9%, −5.6%,
+/// −2.3%, −4.8%, −3.6%; humanoid seeds 1-3 −0.1% each; X2 seeds 1-2 0%, +0.8%. The third
+/// predictor as well changed nothing more (Panda, A1, X2 seeds 1-2: within 0.2%).
 const WIDEN_BELOW: f64 = 0.5;
 
 /// The impulse widening of a blocked warm start (see [`WIDEN_BELOW`]).
@@ -282,7 +291,10 @@ pub(crate) fn solve_to(
         ws.matrix.solve(p, &mut ws.delta_aff);
         let act = &ws.active;
         let alpha_aff = cone_search(model, act, &ws.saturated, &ws.w, &ws.delta_aff, 1.0, 1.0);
-        if it == 0
+        // (the first two predictors: a first step that went far can leave the pairs of a
+        // contact changing state on their boundaries, where the second predictor is cut)
+        if it <= 1
+            && !ws.widened
             && (ws.first_attempt() || resumed)
             && central.is_none()
             && o.warm_start
