@@ -796,7 +796,8 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
         if !report.status.is_success() {
             break;
         }
-        ws.w_solved.copy_from_slice(&ws.w);
+        // (the checks below activate what they find and leave the iterate alone: the
+        // converged iterate is kept only when a round follows)
         ws.active_solved.copy_from_slice(&ws.active);
         let missed = super::activation::missed_contacts(model, ws)
             + super::activation::missed_limits(model, ws)
@@ -804,6 +805,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
         if missed == 0 {
             break;
         }
+        ws.w_solved.copy_from_slice(&ws.w);
         if round == 2 {
             ws.active.fill(true);
         }
