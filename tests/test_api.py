@@ -377,3 +377,7 @@ def test_a_snapshot_restores_a_state_and_its_future_bit_for_bit():
         m.state_from_snapshot(bad)
     with pytest.raises(TypeError, match="snapshot"):
         m.state_from_snapshot("not numbers")
+    bad = snap.copy()
+    bad[5] = np.nan
+    with pytest.raises(ValueError, match=r"snapshot\[5\]"):
+        m.state_from_snapshot(bad)

@@ -127,7 +127,10 @@ impl State {
     }
 
     /// The state of `model` that [`State::snapshot`] wrote; the snapshot's length must be the
-    /// one `model`'s states have, and its interval NaN or positive and finite.
+    /// one `model`'s states have, its interval NaN or positive and finite, its time, poses,
+    /// velocities and joint impulses finite and its orientations unit quaternions (the
+    /// interior-point variables may hold anything: a warm start that is not finite starts from
+    /// the neutral point).
     pub fn from_snapshot(model: &Model, values: &[f64]) -> crate::Result<State> {
         let mut s = State::reference(model);
         let len = 2 + s.heap_bytes() / 8;
@@ -148,6 +151,30 @@ impl State {
                 reason: "must be NaN (unset) or positive and finite".into(),
             }
         );
+        let ineq = len - s.ineq_vars.len();
+        if let Some(i) = (0..ineq).find(|&i| i != 1 && !values[i].is_finite()) {
+            return Err(crate::Error::InvalidInput {
+                field: format!("snapshot[{i}]"),
+                value: values[i].to_string(),
+                reason: "time, poses, velocities and joint impulses must be finite".into(),
+            });
+        }
+        let quats = 2 + s.com_pos.len();
+        for (b, q) in values[quats..quats + s.quat.len()].chunks(4).enumerate() {
+            let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+            crate::ensure!(
+                (norm - 1.0).abs() < 1e-9,
+                crate::Error::InvalidInput {
+                    field: format!(
+                        "snapshot[{}..{}] (orientation of body {b})",
+                        quats + 4 * b,
+                        quats + 4 * b + 4
+                    ),
+                    value: format!("{q:?}"),
+                    reason: format!("must be a unit quaternion (norm {norm})"),
+                }
+            );
+        }
         s.time = values[0];
         s.interval = (!interval.is_nan()).then_some(interval);
         let mut rest = &values[2..];
@@ -1070,5 +1097,14 @@ mod tests {
         bad[1] = -2.0;
         let err = State::from_snapshot(&model, &bad).unwrap_err().to_string();
         assert!(err.contains("interval") && err.contains("-2"), "{err}");
+        // a position that is not finite, and an orientation that is not a unit quaternion
+        let mut bad = state.snapshot();
+        bad[2 + 3] = f64::NAN;
+        let err = State::from_snapshot(&model, &bad).unwrap_err().to_string();
+        assert!(err.contains("snapshot[5]") && err.contains("NaN"), "{err}");
+        let mut bad = state.snapshot();
+        bad[2 + state.com_pos.len() + 4] *= 2.0;
+        let err = State::from_snapshot(&model, &bad).unwrap_err().to_string();
+        assert!(err.contains("orientation of body 1"), "{err}");
     }
 }

@@ -23,33 +23,17 @@ use crate::math::quat;
 /// COM frames, when that is their only relative motion (see the module docs); `None` when they
 /// can also rotate relative to each other, translate along two axes, or not move at all.
 pub fn slide_axis(joints: &[Joint], a: usize, b: usize) -> Option<[Vector3<f64>; 2]> {
-    let (path_a, path_b) = (tree_path(joints, a)?, tree_path(joints, b)?);
-    // the common ancestor: the first body of a's path (a, its parent, …, 0) on b's
-    let common = *path_a.iter().find(|x| path_b.contains(x))?;
+    let (slides, frames) = locked_paths(joints, a, b)?;
     let mut axis: Option<Vector3<f64>> = None;
-    let mut frames = [Matrix3::identity(); 2];
-    for (side, path) in [&path_a, &path_b].into_iter().enumerate() {
-        // orientation relative to the common ancestor, from the ancestor down
-        let below: Vec<usize> = path.iter().take_while(|&&x| x != common).copied().collect();
-        let mut rot = Matrix3::identity();
-        for &child in below.iter().rev() {
-            let joint = tree_joint(joints, child)?;
-            if joint.rot.nfree() > 0 {
-                return None;
-            }
-            // a rotationally locked joint holds the child at its offset from the parent
-            rot *= quat::rotation(&joint.offset);
-            for k in 0..joint.ntrans {
-                let t = rot * joint.trans_basis.column(k).into_owned();
-                let t = t.try_normalize(1e-12)?;
-                match axis {
-                    None => axis = Some(t),
-                    Some(a) if a.cross(&t).norm() <= PARALLEL => {}
-                    Some(_) => return None,
-                }
+    for s in &slides {
+        for t in &s.axes {
+            let t = t.try_normalize(1e-12)?;
+            match axis {
+                None => axis = Some(t),
+                Some(a) if a.cross(&t).norm() <= PARALLEL => {}
+                Some(_) => return None,
             }
         }
-        frames[side] = rot;
     }
     let axis = axis?;
     Some([frames[0].transpose() * axis, frames[1].transpose() * axis])
@@ -64,31 +48,71 @@ pub fn slide_axis(joints: &[Joint], a: usize, b: usize) -> Option<[Vector3<f64>;
 /// travel left, `solver::activation::activate`.)
 pub fn slide_limits(joints: &[Joint], a: usize, b: usize) -> Option<Vec<(usize, usize, f64)>> {
     slide_axis(joints, a, b)?;
+    let (slides, _) = locked_paths(joints, a, b)?;
+    let axis = slides.first()?.axes.first()?.normalize();
+    slides
+        .iter()
+        .map(|s| {
+            // one slide, limited (its free dof 0 is its only coordinate)
+            let joint = &joints[s.joint];
+            if s.axes.len() > 1 || joint.nq() != 1 {
+                return None;
+            }
+            let limit = joint.limits.iter().position(|&(dof, _, _)| dof == 0)?;
+            Some((s.joint, limit, s.sign * s.axes[0].dot(&axis)))
+        })
+        .collect()
+}
+
+/// A joint with free translations on the tree path from a slide pair's body to the bodies'
+/// common ancestor ([`locked_paths`]).
+struct PathSlide {
+    /// The joint's index.
+    joint: usize,
+    /// -1 on `a`'s path (it moves `a`), +1 on `b`'s.
+    sign: f64,
+    /// Its free translation axes in the common ancestor's frame.
+    axes: Vec<Vector3<f64>>,
+}
+
+/// The joints with free translations on the tree paths from `a` and `b` to their common
+/// ancestor, `a`'s path first, and each body's orientation relative to the ancestor; `None`
+/// when a joint on the paths turns (or a body has no tree joint).
+fn locked_paths(
+    joints: &[Joint],
+    a: usize,
+    b: usize,
+) -> Option<(Vec<PathSlide>, [Matrix3<f64>; 2])> {
     let (path_a, path_b) = (tree_path(joints, a)?, tree_path(joints, b)?);
+    // the common ancestor: the first body of a's path (a, its parent, …, 0) on b's
     let common = *path_a.iter().find(|x| path_b.contains(x))?;
-    let mut axis: Option<Vector3<f64>> = None;
-    let mut out = Vec::new();
-    for (sign, path) in [(-1.0, &path_a), (1.0, &path_b)] {
+    let mut slides = Vec::new();
+    let mut frames = [Matrix3::identity(); 2];
+    for (side, path) in [&path_a, &path_b].into_iter().enumerate() {
+        // orientation relative to the common ancestor, from the ancestor down
         let below: Vec<usize> = path.iter().take_while(|&&x| x != common).copied().collect();
         let mut rot = Matrix3::identity();
         for &child in below.iter().rev() {
             let ji = joints.iter().position(|j| j.child == child && !j.is_loop)?;
             let joint = &joints[ji];
-            rot *= quat::rotation(&joint.offset);
-            if joint.ntrans == 0 {
-                continue;
-            }
-            // one slide, limited (its free dof 0 is its only coordinate)
-            if joint.ntrans > 1 || joint.nq() != 1 {
+            if joint.rot.nfree() > 0 {
                 return None;
             }
-            let limit = joint.limits.iter().position(|&(dof, _, _)| dof == 0)?;
-            let t = rot * joint.trans_basis.column(0).into_owned();
-            let ax = *axis.get_or_insert_with(|| t.normalize());
-            out.push((ji, limit, sign * t.dot(&ax)));
+            // a rotationally locked joint holds the child at its offset from the parent
+            rot *= quat::rotation(&joint.offset);
+            if joint.ntrans > 0 {
+                slides.push(PathSlide {
+                    joint: ji,
+                    sign: if side == 0 { -1.0 } else { 1.0 },
+                    axes: (0..joint.ntrans)
+                        .map(|k| rot * joint.trans_basis.column(k).into_owned())
+                        .collect(),
+                });
+            }
         }
+        frames[side] = rot;
     }
-    Some(out)
+    Some((slides, frames))
 }
 
 /// Largest `|a × t|` of two unit axes that count as parallel.
