@@ -575,8 +575,12 @@ pub struct Workspace {
     /// [`Self::joint_filter`]: the other bodies' rows lie outside the perturbation's support, so
     /// their momenta and the joint terms acting on them alone are not computed.
     pub(crate) body_filter: Vec<bool>,
-    /// Scalar force of each actuator (current state and controls).
+    /// Scalar force of each actuator (current state and controls), less the velocity term of
+    /// a servo whose velocity gain acts implicitly (`actuation::split_force`).
     pub(crate) act_force: Vec<f64>,
+    /// Per free dof (`free_adr[j] / 12 + dof`): the damping that servos' velocity gains add to
+    /// the joint's own for this step, taken implicitly like it.
+    pub(crate) servo_damping: Vec<f64>,
     /// `∂k/∂x` of each joint coupling at the current configuration.
     pub(crate) coupling_slope: Vec<f64>,
     /// Per candidate: the feature held fixed for this step (a near-flat disk's rim point, a box
@@ -821,6 +825,7 @@ impl Workspace {
         self.joint_filter.clear();
         self.body_filter.clear();
         self.act_force.fill(0.0);
+        self.servo_damping.fill(0.0);
         self.coupling_slope.fill(0.0);
         // (`nt` is read only while `nt_on`, and every solve clears it first)
         self.nt_on = false;
@@ -1015,6 +1020,7 @@ impl Workspace {
             joint_filter: Vec::new(),
             body_filter: Vec::new(),
             act_force: vec![0.0; model.nu()],
+            servo_damping: vec![0.0; nfree / 12],
             coupling_slope: vec![0.0; model.couplings.len()],
             topology_id: model.topology_id(),
             nt: vec![None; model.ncontact()],

@@ -2,32 +2,15 @@
 //! (`step::long_solve`, then the exact problem without `drop_redundant_friction`'s shortcuts,
 //! then the step from the start rebuilt from its minimal coordinates, then the pyramid friction
 //! cones), and a first attempt retried with the gentle warm-start widening.
+#[path = "common/fixtures.rs"]
+mod fixtures;
 #[allow(dead_code)]
 #[path = "../examples/common/workload.rs"]
 mod workload;
+use fixtures::fixture;
 use ukemi_engine::{
     Coordinates, Linearization, Model, State, Workspace, Wrt, qpos, qvel, set_minimal, step,
 };
-
-/// The hard step kept in `tests/fixtures/NAME.txt` (written by `examples/snapshot_step.rs`
-/// from the trajectory that found it): the shared robot's model with the default options (or
-/// `None` without `../shared`), the state before the step bit for bit (warm start included),
-/// and the step's controls. Kept as snapshots, not replayed: a solver change moves a chaotic
-/// trajectory's later states, and the replayed step was then no longer the hard one.
-fn fixture(name: &str) -> Option<(Model, State, Vec<f64>)> {
-    let path = format!("{}/tests/fixtures/{name}.txt", env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    let field = |key: &str| {
-        let line = text.lines().find_map(|l| l.strip_prefix(key)).unwrap();
-        line.split_whitespace()
-            .map(str::to_owned)
-            .collect::<Vec<_>>()
-    };
-    let model = workload::shared(&field("robot ")[0])?;
-    let numbers = |key| -> Vec<f64> { field(key).iter().map(|x| x.parse().unwrap()).collect() };
-    let state = State::from_snapshot(&model, &numbers("state ")).unwrap();
-    Some((model, state, numbers("ctrl ")))
-}
 
 /// `model` with the options of the sessions that found these steps (`warm_start_widening`
 /// 1e-3, and no widening relative to the weight: session 31's `warm_start_widening_weight`).

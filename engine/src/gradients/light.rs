@@ -5,9 +5,11 @@
 //! - Momenta (Dojo eqs. 16-17): `r_lin = m (v⁺ - v⁻)`, `r_rot = p⁺(ω⁺) - p⁻(ω⁻)` with the backward
 //!   discrete momentum `p⁻(ω) = c J ω - (h/2) ω × J ω`, so `∂r/∂(v⁻, ω⁻) = -diag(m I, ∂p⁻/∂ω)`
 //!   ([`rot_jacobian`] at `-h`: `p⁻` is the forward momentum of the reversed step).
-//! - Actuator forces `F(ctrl, L, L̇)` through their transmissions: each scalar force is
-//!   central-differenced along the column (two calls of the scalar function), so its control
-//!   and force clamps act exactly as in the residual's own central differences.
+//! - Actuator forces `F(ctrl, L, L̇)` through their transmissions: each scalar force's explicit
+//!   part (`actuation::split_force`: a servo's velocity term is taken at the next velocity, so
+//!   inside its force range the current rate drops out) is central-differenced along the column
+//!   (two calls of the scalar function), so its control and force clamps act exactly as in the
+//!   residual's own central differences.
 //! - Armature `a (J_f w⁺ - J_f w⁻)`: linear in the current twists.
 //!
 //! Why: these columns were two residual evaluations each (every body's momentum, every actuator
@@ -16,7 +18,7 @@ use nalgebra::Vector3;
 
 use crate::integrator::variational::rot_jacobian;
 use crate::model::{Model, Transmission};
-use crate::solver::actuation::{actuator_force, length_and_rate};
+use crate::solver::actuation::{length_and_rate, split_force};
 use crate::state::{State, Workspace};
 
 /// What a light column changes.
@@ -66,13 +68,13 @@ pub(super) fn light_column(
         };
         let df = match input {
             Light::Ctrl(_) => {
-                let f = |u: f64| actuator_force(act, u, length, rate);
+                let f = |u: f64| split_force(act, u, length, rate).0;
                 (f(ctrl[a] + eps) - f(ctrl[a] - eps)) / (2.0 * eps)
             }
             Light::Twists(dt) => {
                 let d = |b: usize| (v3(&dt[b][..3]), v3(&dt[b][3..]));
                 let (_, drate) = length_and_rate(model, ws, a, &d);
-                let f = |r: f64| actuator_force(act, ctrl[a], length, r);
+                let f = |r: f64| split_force(act, ctrl[a], length, r).0;
                 (f(rate + eps * drate) - f(rate - eps * drate)) / (2.0 * eps)
             }
         };

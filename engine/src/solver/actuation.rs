@@ -5,6 +5,15 @@
 //! `gear · moment · F` on joint dofs, or as a site wrench. NOTE: the force clamp is not smooth;
 //! beyond it the force does not depend on the state or the control (zero derivative), which the
 //! central-difference partials of the gradients reproduce.
+//!
+//! **A servo's velocity gain is implicit** ([`split_force`]): on a joint transmission whose
+//! force is inside its range, `bias₂ L̇` is taken at the step's own (next midpoint) velocity, a
+//! damper of `-bias₂ gear²` on the dof, as MuJoCo's `implicit` and `implicitfast` integrators
+//! take it. Why: position servos are stiff dampers. The Franka Panda's (`kv` = 200-450 N·m·s
+//! on ~0.1-2 kg·m²) need `h kv / I < 2` when explicit, and at h = 0.01 its arm held at its home
+//! pose shook at ±3.5 rad/s, as it does in MuJoCo with the Euler integrator (its MJCF asks for
+//! `implicitfast`), and a rollout's adjoints grew ~10× every 25 steps. Tendon and site
+//! transmissions keep the explicit rate.
 use nalgebra::Vector3;
 
 use crate::math::quat;
@@ -59,6 +68,15 @@ pub(crate) fn length_and_rate(
 
 /// The scalar force of actuator `act` at control `ctrl` and transmission length and rate.
 pub(crate) fn actuator_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> f64 {
+    let force = unclamped_force(act, ctrl, length, rate);
+    match act.forcerange {
+        Some((lo, hi)) => force.clamp(lo, hi),
+        None => force,
+    }
+}
+
+/// [`actuator_force`] before its force range.
+fn unclamped_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> f64 {
     let u = match act.ctrlrange {
         Some((lo, hi)) => ctrl.clamp(lo, hi),
         None => ctrl,
@@ -67,23 +85,48 @@ pub(crate) fn actuator_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) 
     if act.has_bias() {
         force += act.bias[1] * act.gear * length + act.bias[2] * act.gear * rate;
     }
+    force
+}
+
+/// The explicit part of actuator `act`'s force and the velocity gain `∂F/∂L̇` taken implicitly
+/// (0: none), at control `ctrl` and transmission length and current rate: a joint-transmission
+/// servo (`bias₂ ≠ 0`) whose unclamped force lies inside its force range has the force less its
+/// velocity term, and gain `bias₂ gear`; any other actuator its whole force ([`actuator_force`]),
+/// and gain 0. The force is then `explicit + gain · L̇⁺`, `L̇⁺` at the next midpoint velocity.
+pub(crate) fn split_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> (f64, f64) {
+    let implicit = matches!(act.transmission, Transmission::Joint { .. }) && act.bias[2] != 0.0;
+    if !implicit {
+        return (actuator_force(act, ctrl, length, rate), 0.0);
+    }
+    let force = unclamped_force(act, ctrl, length, rate);
+    let gain = act.bias[2] * act.gear;
     match act.forcerange {
-        Some((lo, hi)) => force.clamp(lo, hi),
-        None => force,
+        Some((lo, hi)) if !(lo < force && force < hi) => (force.clamp(lo, hi), 0.0),
+        _ => (force - gain * rate, gain),
     }
 }
 
-/// Scalar force of every actuator into `ws.act_force` (needs `ws.free_jac` and `ws.joint_q` at
-/// the current state).
+/// Scalar force of every actuator into `ws.act_force`, and the servos' implicit velocity gains
+/// as dof damping into `ws.servo_damping` ([`split_force`]; needs `ws.free_jac` and
+/// `ws.joint_q` at the current state).
 pub(crate) fn actuator_forces(model: &Model, state: &State, ws: &mut Workspace, ctrl: &[f64]) {
     let twist = |b: usize| state.velocity(b);
+    // the applied impulses act over (h_prev + h) / 2 (see `prepare_smooth_forces`), a damper's
+    // over h: the damping that gives the servo's impulse over the former
+    let h = model.options.timestep;
+    let over = 0.5 * (1.0 + state.interval(h) / h);
+    ws.servo_damping.fill(0.0);
     for (a, act) in model.actuators.iter().enumerate() {
         let (length, rate) = if act.has_bias() {
             length_and_rate(model, ws, a, &twist)
         } else {
             (0.0, 0.0)
         };
-        ws.act_force[a] = actuator_force(act, ctrl[a], length, rate);
+        let (force, gain) = split_force(act, ctrl[a], length, rate);
+        ws.act_force[a] = force;
+        if let (Transmission::Joint { joint, dof }, true) = (&act.transmission, gain != 0.0) {
+            ws.servo_damping[ws.free_adr[*joint] / 12 + dof] -= gain * act.gear * over;
+        }
     }
 }
 
@@ -121,5 +164,56 @@ pub(crate) fn add_site_wrenches(model: &Model, state: &State, ws: &mut Workspace
             ap[i] += h * force_w[i];
             ap[3 + i] += h * torque_b[i];
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A position servo on dof 0 of joint 0: `F = kp (u - q) - kv q̇`, gear 2.
+    fn servo(forcerange: Option<(f64, f64)>) -> Actuator {
+        Actuator {
+            name: "servo".into(),
+            transmission: Transmission::Joint { joint: 0, dof: 0 },
+            gear: 2.0,
+            ctrlrange: None,
+            forcerange,
+            gain: 50.0,
+            bias: [0.0, -50.0, -8.0],
+        }
+    }
+
+    /// Inside its force range a servo's force is its explicit part plus its velocity gain times
+    /// the rate, whatever the rate it is split at; clamped, it is the clamp, all explicit; a
+    /// motor (no velocity term) and a tendon servo stay explicit.
+    #[test]
+    fn a_servo_splits_off_its_velocity_gain_only_inside_its_range() {
+        let (u, length, rate) = (0.3, 0.1, 0.2);
+        let act = servo(Some((-10.0, 10.0)));
+        let whole = actuator_force(&act, u, length, rate);
+        let (explicit, gain) = split_force(&act, u, length, rate);
+        assert_eq!(gain, -8.0 * 2.0);
+        assert!(
+            (explicit + gain * rate - whole).abs() < 1e-12,
+            "{explicit} {gain} {whole}"
+        );
+        let (at_rest, same) = split_force(&act, u, length, 0.0);
+        assert!((at_rest - explicit).abs() < 1e-12 && same == gain);
+        // 50 · 0.3 - 50 · 2 · 0.1 - 8 · 2 · 5 = -75: clamped at -10 (at rate 0.2: 1.8, inside)
+        assert_eq!(split_force(&act, u, length, 5.0), (-10.0, 0.0));
+        let motor = Actuator {
+            bias: [0.0; 3],
+            ..servo(None)
+        };
+        assert_eq!(split_force(&motor, u, length, rate), (50.0 * u, 0.0));
+        let tendon = Actuator {
+            transmission: Transmission::Tendon(vec![(0, 0, 1.0)]),
+            ..servo(None)
+        };
+        assert_eq!(
+            split_force(&tendon, u, length, rate),
+            (actuator_force(&tendon, u, length, rate), 0.0)
+        );
     }
 }

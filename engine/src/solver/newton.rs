@@ -470,6 +470,7 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
         free_adr,
         joint_filter,
         body_filter,
+        servo_damping,
         ..
     } = ws;
     let row = |b: usize| b > 0 && (body_filter.is_empty() || body_filter[b]);
@@ -530,8 +531,10 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
         if !row(joint.parent) && !row(joint.child) {
             continue; // (its damper and armature act on these bodies' rows alone)
         }
-        if joint.has_damper() {
-            add_damper_residual(model, joint, &free_jac[free_adr[ji]..], w, residual, h);
+        let servo = &servo_damping[free_adr[ji] / 12..free_adr[ji] / 12 + joint.nfree()];
+        if joint.has_damper() || servo.iter().any(|&d| d != 0.0) {
+            let jf = &free_jac[free_adr[ji]..];
+            add_damper_residual(model, joint, jf, servo, w, residual, h);
         }
         if joint.has_armature() {
             let jf = &free_jac[free_adr[ji]..];
@@ -578,11 +581,13 @@ fn inf_norm(x: &[f64]) -> f64 {
     })
 }
 
-/// `r_b += h J_bᵀ D (J_f w⁺)`: implicit damper impulses on both bodies.
+/// `r_b += h J_bᵀ D (J_f w⁺)`: implicit damper impulses on both bodies, `D` the joint's damping
+/// plus the servos' (`servo`, per free dof: `actuation::split_force`).
 fn add_damper_residual(
     model: &Model,
     joint: &Joint,
     jf: &[f64],
+    servo: &[f64],
     w: &[f64],
     residual: &mut [f64],
     h: f64,
@@ -598,7 +603,7 @@ fn add_damper_residual(
     for r in 0..joint.nfree() {
         let row = &jf[12 * r..12 * r + 12];
         let rate: f64 = row.iter().zip(x.iter()).map(|(a, b)| a * b).sum();
-        let f = h * joint.damping[r] * rate;
+        let f = h * (joint.damping[r] + servo[r]) * rate;
         for (side, b) in [(0, joint.parent), (1, joint.child)] {
             if b > 0 {
                 let ob = body_slot(model, b);
@@ -680,14 +685,18 @@ fn assemble_joint(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h
             }
         }
     }
-    if joint.has_damper() || joint.has_armature() {
+    let fd = ws.free_adr[ji] / 12;
+    let servo = ws.servo_damping[fd..fd + joint.nfree()]
+        .iter()
+        .any(|&d| d != 0.0);
+    if joint.has_damper() || joint.has_armature() || servo {
         add_free_coupling_blocks(model, ws, ji, joint, h);
     }
 }
 
 /// `J_aᵀ C J_b` into the body blocks (a, b) for a, b ∈ {parent, child}, with the per-dof
-/// coefficient `C = h · damping + armature`: implicit dampers and rotor inertia both act on the
-/// next free-coordinate rates, so they share one coupling term.
+/// coefficient `C = h · (damping + servo damping) + armature`: implicit dampers and rotor
+/// inertia both act on the next free-coordinate rates, so they share one coupling term.
 fn add_free_coupling_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint: &Joint, h: f64) {
     let t = &model.topology;
     let fa = ws.free_adr[ji];
@@ -714,7 +723,9 @@ fn add_free_coupling_blocks(model: &Model, ws: &mut Workspace, ji: usize, joint:
             let block = &mut ws.matrix.values[off..off + 36];
             for r in 0..joint.nfree() {
                 let row = &ws.free_jac[fa + 12 * r..fa + 12 * r + 12];
-                let d = h * joint.damping[r] + joint.armature.get(r).copied().unwrap_or(0.0);
+                let servo = ws.servo_damping[fa / 12 + r];
+                let d =
+                    h * (joint.damping[r] + servo) + joint.armature.get(r).copied().unwrap_or(0.0);
                 let (ra, rb) = (&row[6 * sa..6 * sa + 6], &row[6 * sb..6 * sb + 6]);
                 for (out, &a) in block.chunks_exact_mut(6).zip(ra) {
                     // (d a) b: the product in the order written before
