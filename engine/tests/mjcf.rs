@@ -239,3 +239,38 @@ fn site_thrust_lifts_at_the_analytic_acceleration() {
     assert!((v[2] - expected).abs() < 1e-9, "{v:?} vs {expected}");
     assert!(v[3..].iter().all(|w| w.abs() < 1e-9), "{v:?}");
 }
+
+/// `<position dampratio>` (MuJoCo's `set0`): `kv = 2 ζ sqrt(kp m)` with `m` the inertia the
+/// transmission reflects at qpos0. A point mass 2 kg at 0.5 m on a hinge with armature 0.1,
+/// gear 2: `m = (2 · 0.25 + 0.1) / 2²`, so `kv = 2 · 0.7 · sqrt(80 · 0.15)`. A general servo
+/// with a positive `biasprm[2]` and `gainprm[0] = -biasprm[1]` is the same damping ratio;
+/// with other gains it is kept as written; `kv` and `dampratio` together are an error.
+#[test]
+fn a_damping_ratio_becomes_the_velocity_gain_of_the_reflected_inertia() {
+    let xml = |act: &str| {
+        format!(
+            r#"<mujoco><worldbody><body name="a"><joint name="j" axis="0 1 0" armature="0.1"/>
+            <geom type="sphere" size="0.01" pos="0.5 0 0" mass="2"/>
+            <inertial pos="0.5 0 0" mass="2" diaginertia="1e-9 1e-9 1e-9"/></body></worldbody>
+            <actuator>{act}</actuator></mujoco>"#
+        )
+    };
+    let kv = |act: &str| load(&xml(act)).model.actuators[0].bias[2];
+    let expected = -2.0 * 0.7 * (80.0f64 * (2.0 * 0.25 + 0.1) / 4.0).sqrt();
+    let got = kv(r#"<position joint="j" kp="80" gear="2" dampratio="0.7"/>"#);
+    assert!(
+        (got - expected).abs() < 1e-9 * expected.abs(),
+        "{got} vs {expected}"
+    );
+    let general =
+        r#"<general joint="j" gear="2" gainprm="80" biastype="affine" biasprm="0 -80 0.7"/>"#;
+    assert!((kv(general) - expected).abs() < 1e-9 * expected.abs());
+    let literal = r#"<general joint="j" gainprm="80" biastype="affine" biasprm="0 -40 0.7"/>"#;
+    assert_eq!(kv(literal), 0.7);
+    let both = load_str(
+        &xml(r#"<position joint="j" kp="80" kv="3" dampratio="1"/>"#),
+        "<t>",
+    );
+    let e = both.unwrap_err().to_string();
+    assert!(e.contains("kv and dampratio"), "{e}");
+}

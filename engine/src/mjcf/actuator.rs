@@ -148,7 +148,7 @@ fn gain_bias<'a, 'i>(
     class: &str,
     tag: &str,
 ) -> Result<(f64, [f64; 3])> {
-    for t in ["dampratio", "timeconst", "inheritrange"] {
+    for t in ["timeconst", "inheritrange"] {
         if a.attribute(t).is_some_and(|v| v.trim() != "0") {
             return Err(ctx.unsupported(a, format!("actuator attribute `{t}`")));
         }
@@ -158,7 +158,22 @@ fn gain_bias<'a, 'i>(
         "position" => {
             let kp = ctx.num(a, class, "kp", 1.0)?;
             let kv = ctx.num(a, class, "kv", 0.0)?;
-            (kp, [0.0, -kp, -kv])
+            let dampratio = ctx.num(a, class, "dampratio", 0.0)?;
+            if kv != 0.0 && dampratio != 0.0 {
+                return Err(ctx.err(a, "kv and dampratio cannot both be defined"));
+            }
+            if dampratio < 0.0 || kv < 0.0 {
+                return Err(ctx.err(
+                    a,
+                    format!("kv = {kv}, dampratio = {dampratio}: must be >= 0"),
+                ));
+            }
+            // a damping ratio is kept as a positive velocity bias until the model's inertia
+            // at qpos0 turns it into a gain ([`resolve_dampratios`]), as MuJoCo keeps it
+            (
+                kp,
+                [0.0, -kp, if dampratio > 0.0 { dampratio } else { -kv }],
+            )
         }
         "velocity" => {
             let kv = ctx.num(a, class, "kv", 1.0)?;
@@ -414,4 +429,90 @@ pub(super) fn read_contact<'a, 'i>(
         }
     }
     Ok(())
+}
+
+/// MuJoCo's damping ratios (`<position dampratio>`, or a `general` servo whose `biasprm[2]` is
+/// positive and whose gain is its position gain, `gainprm[0] = -biasprm[1]`): each such
+/// actuator's velocity gain becomes `kv = 2 · dampratio · sqrt(kp · m)`, with `m = 1 / (J M⁻¹
+/// Jᵀ)` the inertia its transmission `J` (gear times each dof's coefficient) reflects at
+/// `qpos0`, `M` the joint-space inertia there with armature (MuJoCo's `set0`). Critical
+/// damping of the servo's dof at 1 when it alone moves.
+pub(super) fn resolve_dampratios(model: &mut crate::Model) -> std::result::Result<(), String> {
+    use crate::model::Transmission;
+    let dampratio = |a: &crate::model::Actuator| a.bias[2] > 0.0 && a.gain == -a.bias[1];
+    if !model.actuators.iter().any(dampratio) {
+        return Ok(());
+    }
+    let inertia = joint_space_inertia(model)?;
+    let lu = inertia.clone().lu();
+    for a in 0..model.actuators.len() {
+        let act = &model.actuators[a];
+        if !dampratio(act) {
+            continue;
+        }
+        let mut moment = nalgebra::DVector::zeros(model.nv);
+        let mut add = |j: usize, dof: usize, coef: f64| {
+            moment[model.joints[j].qvel_adr + dof] += act.gear * coef;
+        };
+        match &act.transmission {
+            Transmission::Joint { joint, dof } => add(*joint, *dof, 1.0),
+            Transmission::Tendon(terms) => terms.iter().for_each(|t| add(t.0, t.1, t.2)),
+            Transmission::Site { .. } => {
+                return Err(format!(
+                    "actuator {:?}: a damping ratio on a site",
+                    act.name
+                ));
+            }
+        }
+        let reflected = lu
+            .solve(&moment)
+            .map(|x| moment.dot(&x))
+            .filter(|w| w.is_finite() && *w > 0.0)
+            .ok_or_else(|| format!("actuator {:?}: no inertia reflected through its transmission at qpos0 for its dampratio", act.name))?;
+        let (kp, ratio) = (act.gain, act.bias[2]);
+        model.actuators[a].bias[2] = -2.0 * ratio * (kp / reflected).sqrt();
+    }
+    Ok(())
+}
+
+/// The joint-space inertia `M` (nv × nv) at `qpos0`, armature on its diagonal: `qvelᵀ M qvel`
+/// is twice the kinetic energy of the bodies moving at `qvel`, so `M` follows from the energies
+/// of the unit rates and of their pairwise sums.
+fn joint_space_inertia(
+    model: &crate::Model,
+) -> std::result::Result<nalgebra::DMatrix<f64>, String> {
+    use crate::mechanics::kinetic_energy;
+    let nv = model.nv;
+    let mut state = crate::State::reference(model);
+    let mut energy = |qvel: &[f64]| -> std::result::Result<f64, String> {
+        crate::set_minimal(model, &mut state, &model.qpos0, qvel).map_err(|e| e.to_string())?;
+        Ok(kinetic_energy(model, &state))
+    };
+    let mut unit = vec![0.0; nv];
+    let mut single = vec![0.0; nv];
+    for (i, e) in single.iter_mut().enumerate() {
+        unit[i] = 1.0;
+        *e = energy(&unit)?;
+        unit[i] = 0.0;
+    }
+    let mut m = nalgebra::DMatrix::zeros(nv, nv);
+    for i in 0..nv {
+        m[(i, i)] = 2.0 * single[i];
+        for j in 0..i {
+            unit[i] = 1.0;
+            unit[j] = 1.0;
+            let both = energy(&unit)?;
+            unit[i] = 0.0;
+            unit[j] = 0.0;
+            let mij = both - single[i] - single[j];
+            m[(i, j)] = mij;
+            m[(j, i)] = mij;
+        }
+    }
+    for joint in model.joints.iter().filter(|j| !j.is_loop) {
+        for (r, arm) in joint.armature.iter().enumerate() {
+            m[(joint.qvel_adr + r, joint.qvel_adr + r)] += arm;
+        }
+    }
+    Ok(m)
 }

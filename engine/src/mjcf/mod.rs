@@ -9,7 +9,8 @@
 //! connect/weld (loop joints) and joint (a polynomial coupling solved with the joints), fixed
 //! tendons as actuator transmissions and, when limited, as hard tendon limits (inequalities
 //! solved with the contacts), `actuator` motor/position/velocity/general on joints, fixed
-//! tendons and sites (with `forcerange`), and `keyframe`.
+//! tendons and sites (with `forcerange`, and a position servo's `dampratio` turned into its
+//! velocity gain at qpos0 as MuJoCo does), and `keyframe`.
 //!
 //! Anything else is an [`Error::Unsupported`] or an [`Error::Mjcf`] naming the element and its
 //! line, or — where ignoring it only drops an effect ukemi does not model (solver settings,
@@ -125,6 +126,8 @@ pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
     }
     exclude_pairs(&mut ctx, &tree, &mut b);
     let mut model = b.compile().map_err(|e| locate(&ctx, e))?;
+    actuator::resolve_dampratios(&mut model)
+        .map_err(|e| crate::Error::model("actuator", "dampratio", e))?;
     if let Some(k) = elements(root).find(|n| n.tag_name().name() == "keyframe") {
         model.keyframes = actuator::read_keyframes(&ctx, k, &model.qpos0, model.nv, model.nu())?;
     }
