@@ -493,25 +493,29 @@ SERVO_ARM = """<mujoco><option timestep="0.01" gravity="0 0 -9.81"/>
     <body name="fore" pos="0.3 0 0"><joint name="elbow"/>
       <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="0.5"/></body>
   </body></worldbody>
+  <tendon><fixed name="sum"><joint joint="shoulder" coef="0.5"/><joint joint="elbow" coef="1"/></fixed></tendon>
   <actuator><position joint="shoulder" kp="200" kv="40" {range}/>
-    <position joint="elbow" kp="100" kv="20" {range}/></actuator></mujoco>"""
+    <position joint="elbow" kp="100" kv="20" {range}/>{tendon}</actuator></mujoco>"""
 
 
-@pytest.mark.parametrize("forcerange", [None, 4.0])
-def test_servo_arm_is_stable_and_its_jacobians_match_finite_differences(forcerange):
+@pytest.mark.parametrize("forcerange, tendon", [(None, False), (4.0, False), (None, True)])
+def test_servo_arm_is_stable_and_its_jacobians_match_finite_differences(forcerange, tendon):
     """A two-link arm on position servos whose velocity gains would need h kv / I < 2 if taken
     explicitly (here ~20 at h = 0.01): taken implicitly (`actuation::split_force`) it settles
     where gravity and the servos balance, along MuJoCo's `implicitfast` trajectory on the same
     MJCF, and its Jacobians equal central differences of the step, inside the servos' force
-    range and (forcerange 4 N·m) with a servo's force clamped."""
+    range and (forcerange 4 N·m) with a servo's force clamped, and with a third servo on a
+    fixed tendon over both joints (its damping couples the two links' bodies)."""
     rng_attr = "" if forcerange is None else f'forcelimited="true" forcerange="-{forcerange} {forcerange}"'
+    xml = SERVO_ARM.format(range=rng_attr,
+                           tendon='<position tendon="sum" kp="60" kv="15"/>' if tendon else "")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        m = tight(ukemi.Model.from_xml_string(SERVO_ARM.format(range=rng_attr)))
-    target = np.array([0.4, -0.6])
+        m = tight(ukemi.Model.from_xml_string(xml))
+    target = np.array([0.4, -0.6, 0.0][:m.nu])
     s = m.make_state()
     mujoco = pytest.importorskip("mujoco")
-    mj = mujoco.MjModel.from_xml_string(SERVO_ARM.format(range=rng_attr))
+    mj = mujoco.MjModel.from_xml_string(xml)
     mj.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     d = mujoco.MjData(mj)
     worst = 0.0
@@ -527,7 +531,7 @@ def test_servo_arm_is_stable_and_its_jacobians_match_finite_differences(forceran
     # the shoulder's servo force 200 (0.12 - 0.1) - 40 · 0.05 = 2 N·m, the elbow's -48 N·m
     # (clamped at 4 N·m)
     s = m.make_state(qpos=[0.1, 0.3], qvel=[0.05, -0.1])
-    ctrl = np.array([0.12, -0.2])
+    ctrl = np.array([0.12, -0.2, 0.3][:m.nu])
     jac = ukemi.step_jacobians(m, s, ctrl, wrt=("state", "ctrl"))
     A, B = fd_A_B(m, s, ctrl)
     np.testing.assert_allclose(jac.A, A, atol=1e-6 * max(1.0, np.abs(A).max()))

@@ -581,6 +581,9 @@ pub struct Workspace {
     /// Per free dof (`free_adr[j] / 12 + dof`): the damping that servos' velocity gains add to
     /// the joint's own for this step, taken implicitly like it.
     pub(crate) servo_damping: Vec<f64>,
+    /// Per actuator: the damping a fixed-tendon servo's velocity gain puts on the tendon's rate
+    /// for this step (0 for the others), taken implicitly.
+    pub(crate) tendon_damping: Vec<f64>,
     /// `∂k/∂x` of each joint coupling at the current configuration.
     pub(crate) coupling_slope: Vec<f64>,
     /// Per candidate: the feature held fixed for this step (a near-flat disk's rim point, a box
@@ -826,6 +829,7 @@ impl Workspace {
         self.body_filter.clear();
         self.act_force.fill(0.0);
         self.servo_damping.fill(0.0);
+        self.tendon_damping.fill(0.0);
         self.coupling_slope.fill(0.0);
         // (`nt` is read only while `nt_on`, and every solve clears it first)
         self.nt_on = false;
@@ -1021,6 +1025,7 @@ impl Workspace {
             body_filter: Vec::new(),
             act_force: vec![0.0; model.nu()],
             servo_damping: vec![0.0; nfree / 12],
+            tendon_damping: vec![0.0; model.nu()],
             coupling_slope: vec![0.0; model.couplings.len()],
             topology_id: model.topology_id(),
             nt: vec![None; model.ncontact()],

@@ -386,6 +386,7 @@ impl ModelBuilder {
         let contacts = self.compile_pairs(&geoms, &joints, &names)?;
         let couplings = compile_couplings(&self.couplings, &joints)?;
         let tendon_limits = compile_tendon_limits(&self.tendon_limits, &joints)?;
+        let actuators = self.compile_actuators(&joints, &bodies)?;
         let topology = Topology::new(
             bodies.len(),
             &joints,
@@ -394,9 +395,9 @@ impl ModelBuilder {
             &contacts,
             &couplings,
             &tendon_limits,
+            &crate::solver::actuation::servo_tendons(&actuators),
         )
         .map_err(|e| Error::model("joints", "graph", e))?;
-        let actuators = self.compile_actuators(&joints, &bodies)?;
         let nq = joints.iter().filter(|j| !j.is_loop).map(Joint::nq).sum();
         let nv = joints.iter().filter(|j| !j.is_loop).map(Joint::nfree).sum();
         let mut model = Model {

@@ -173,6 +173,7 @@ impl Model {
             &m.contacts,
             &m.couplings,
             &m.tendon_limits,
+            &crate::solver::actuation::servo_tendons(&m.actuators),
         )
         .map_err(|e| crate::Error::model("joints", "graph", e))?;
         Ok(m)

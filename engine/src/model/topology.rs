@@ -95,6 +95,7 @@ pub(crate) fn body_node(b: usize) -> Option<usize> {
 
 impl Topology {
     /// Build the graph; `parent_joint[b]` is the tree joint whose child is `b` (`None` for world).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         nbody: usize,
         joints: &[Joint],
@@ -103,6 +104,7 @@ impl Topology {
         contacts: &[Contact],
         couplings: &[Coupling],
         tendons: &[TendonLimit],
+        servo_tendons: &[Vec<usize>],
     ) -> Result<Self, String> {
         let nmoving = nbody - 1;
         let mut dims = vec![6; nmoving];
@@ -180,6 +182,16 @@ impl Topology {
         for (c, bodies) in contact_bodies.iter().enumerate() {
             for b in bodies {
                 edges.extend(body_node(*b).map(|b| (contact_node[c], b)));
+            }
+        }
+        // a tendon servo's implicit velocity gain couples every pair of its joints' bodies
+        // (`actuation::split_force`)
+        for terms in servo_tendons {
+            let bodies = moving_bodies(joints, terms.iter().copied());
+            for (i, &a) in bodies.iter().enumerate() {
+                for &b in &bodies[i + 1..] {
+                    edges.extend(body_node(a).zip(body_node(b)));
+                }
             }
         }
         for (j, joint) in joints.iter().enumerate() {

@@ -12,8 +12,9 @@
 //! take it. Why: position servos are stiff dampers. The Franka Panda's (`kv` = 200-450 N·m·s
 //! on ~0.1-2 kg·m²) need `h kv / I < 2` when explicit, and at h = 0.01 its arm held at its home
 //! pose shook at ±3.5 rad/s, as it does in MuJoCo with the Euler integrator (its MJCF asks for
-//! `implicitfast`), and a rollout's adjoints grew ~10× every 25 steps. Tendon and site
-//! transmissions keep the explicit rate.
+//! `implicitfast`), and a rollout's adjoints grew ~10× every 25 steps. A fixed-tendon servo's
+//! velocity term is implicit the same way, a damper on the tendon's rate coupling every pair
+//! of its joints' bodies (the topology links them: [`servo_tendons`]); a site keeps none.
 use nalgebra::Vector3;
 
 use crate::math::quat;
@@ -89,12 +90,12 @@ fn unclamped_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> f64 {
 }
 
 /// The explicit part of actuator `act`'s force and the velocity gain `∂F/∂L̇` taken implicitly
-/// (0: none), at control `ctrl` and transmission length and current rate: a joint-transmission
+/// (0: none), at control `ctrl` and transmission length and current rate: a joint or tendon
 /// servo (`bias₂ ≠ 0`) whose unclamped force lies inside its force range has the force less its
 /// velocity term, and gain `bias₂ gear`; any other actuator its whole force ([`actuator_force`]),
 /// and gain 0. The force is then `explicit + gain · L̇⁺`, `L̇⁺` at the next midpoint velocity.
 pub(crate) fn split_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> (f64, f64) {
-    let implicit = matches!(act.transmission, Transmission::Joint { .. }) && act.bias[2] != 0.0;
+    let implicit = !matches!(act.transmission, Transmission::Site { .. }) && act.bias[2] != 0.0;
     if !implicit {
         return (actuator_force(act, ctrl, length, rate), 0.0);
     }
@@ -106,9 +107,23 @@ pub(crate) fn split_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> 
     }
 }
 
+/// The joints of each fixed-tendon actuator with a velocity gain (`bias₂ ≠ 0`): the body pairs
+/// its implicit damping couples need blocks in the Newton matrix ([`split_force`]).
+pub(crate) fn servo_tendons(actuators: &[Actuator]) -> Vec<Vec<usize>> {
+    actuators
+        .iter()
+        .filter(|a| a.bias[2] != 0.0)
+        .filter_map(|a| match &a.transmission {
+            Transmission::Tendon(terms) => Some(terms.iter().map(|t| t.0).collect()),
+            _ => None,
+        })
+        .collect()
+}
+
 /// Scalar force of every actuator into `ws.act_force`, and the servos' implicit velocity gains
-/// as dof damping into `ws.servo_damping` ([`split_force`]; needs `ws.free_jac` and
-/// `ws.joint_q` at the current state).
+/// as damping: of a joint servo on its dof (`ws.servo_damping`), of a tendon servo on the
+/// tendon's rate (`ws.tendon_damping`) ([`split_force`]; needs `ws.free_jac` and `ws.joint_q`
+/// at the current state).
 pub(crate) fn actuator_forces(model: &Model, state: &State, ws: &mut Workspace, ctrl: &[f64]) {
     let twist = |b: usize| state.velocity(b);
     // the applied impulses act over (h_prev + h) / 2 (see `prepare_smooth_forces`), a damper's
@@ -124,8 +139,14 @@ pub(crate) fn actuator_forces(model: &Model, state: &State, ws: &mut Workspace, 
         };
         let (force, gain) = split_force(act, ctrl[a], length, rate);
         ws.act_force[a] = force;
-        if let (Transmission::Joint { joint, dof }, true) = (&act.transmission, gain != 0.0) {
-            ws.servo_damping[ws.free_adr[*joint] / 12 + dof] -= gain * act.gear * over;
+        let damping = -gain * act.gear * over;
+        ws.tendon_damping[a] = 0.0;
+        match &act.transmission {
+            Transmission::Joint { joint, dof } => {
+                ws.servo_damping[ws.free_adr[*joint] / 12 + dof] += damping;
+            }
+            Transmission::Tendon(_) => ws.tendon_damping[a] = damping,
+            Transmission::Site { .. } => {}
         }
     }
 }
@@ -186,7 +207,7 @@ mod tests {
 
     /// Inside its force range a servo's force is its explicit part plus its velocity gain times
     /// the rate, whatever the rate it is split at; clamped, it is the clamp, all explicit; a
-    /// motor (no velocity term) and a tendon servo stay explicit.
+    /// motor (no velocity term) stays explicit, and a tendon servo splits as a joint servo does.
     #[test]
     fn a_servo_splits_off_its_velocity_gain_only_inside_its_range() {
         let (u, length, rate) = (0.3, 0.1, 0.2);
@@ -211,9 +232,6 @@ mod tests {
             transmission: Transmission::Tendon(vec![(0, 0, 1.0)]),
             ..servo(None)
         };
-        assert_eq!(
-            split_force(&tendon, u, length, rate),
-            (actuator_force(&tendon, u, length, rate), 0.0)
-        );
+        assert_eq!(split_force(&tendon, u, length, rate).1, -8.0 * 2.0);
     }
 }

@@ -18,6 +18,7 @@ use crate::joints::Joint;
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::math::quat;
 use crate::model::Model;
+use crate::model::Transmission;
 use crate::model::topology_body_node as body_node;
 use crate::state::{SolveStatus, State, StepReport, Workspace};
 
@@ -471,6 +472,7 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
         joint_filter,
         body_filter,
         servo_damping,
+        tendon_damping,
         ..
     } = ws;
     let row = |b: usize| b > 0 && (body_filter.is_empty() || body_filter[b]);
@@ -541,8 +543,116 @@ fn smooth_rows(model: &Model, state: &State, ws: &mut Workspace, w: &[f64], resi
             super::armature::add_armature_residual(model, state, joint, jf, w, residual);
         }
     }
+    add_tendon_servo_residual(model, free_jac, free_adr, tendon_damping, w, residual, h);
     if !model.couplings.is_empty() {
         super::coupling::add_rows(model, ws, w, residual);
+    }
+}
+
+/// A fixed tendon's terms `(joint, free dof, coef)`.
+type TendonTerms = [(usize, usize, f64)];
+
+/// The terms of fixed-tendon servo `a` with its implicit damping `d`
+/// (`actuation::actuator_forces`), when it has one.
+fn tendon_servo<'m>(model: &'m Model, damping: &[f64], a: usize) -> Option<(&'m TendonTerms, f64)> {
+    match (&model.actuators[a].transmission, damping[a]) {
+        (Transmission::Tendon(terms), d) if d != 0.0 => Some((terms, d)),
+        _ => None,
+    }
+}
+
+/// `r_b += h d coef_t J_tbᵀ L̇⁺` for each term `t` of each fixed-tendon servo with implicit
+/// damping `d`, `L̇⁺ = Σ coef J_f w⁺` the tendon's rate at the iterate (the joint damper's form,
+/// [`add_damper_residual`], on the tendon's rate).
+fn add_tendon_servo_residual(
+    model: &Model,
+    free_jac: &[f64],
+    free_adr: &[usize],
+    damping: &[f64],
+    w: &[f64],
+    residual: &mut [f64],
+    h: f64,
+) {
+    for a in 0..model.actuators.len() {
+        let Some((terms, d)) = tendon_servo(model, damping, a) else {
+            continue;
+        };
+        let row =
+            |j: usize, dof: usize| &free_jac[free_adr[j] + 12 * dof..free_adr[j] + 12 * dof + 12];
+        let mut rate = 0.0;
+        for &(j, dof, coef) in terms {
+            let joint = &model.joints[j];
+            for (side, b) in [(0, joint.parent), (1, joint.child)]
+                .into_iter()
+                .filter(|s| s.1 > 0)
+            {
+                let (v, om) = w_body(model, w, b);
+                let r = &row(j, dof)[6 * side..6 * side + 6];
+                rate += coef
+                    * (r[0] * v[0]
+                        + r[1] * v[1]
+                        + r[2] * v[2]
+                        + r[3] * om[0]
+                        + r[4] * om[1]
+                        + r[5] * om[2]);
+            }
+        }
+        for &(j, dof, coef) in terms {
+            let joint = &model.joints[j];
+            let f = h * d * coef * rate;
+            for (side, b) in [(0, joint.parent), (1, joint.child)]
+                .into_iter()
+                .filter(|s| s.1 > 0)
+            {
+                let ob = body_slot(model, b);
+                let r = &row(j, dof)[6 * side..6 * side + 6];
+                for i in 0..6 {
+                    residual[ob + i] += r[i] * f;
+                }
+            }
+        }
+    }
+}
+
+/// `h d coef_t coef_u J_taᵀ J_ub` into the body blocks (a, b) of every pair of terms `t, u` of
+/// each fixed-tendon servo with implicit damping `d` (the topology gives every pair of its
+/// bodies a block: `actuation::servo_tendons`).
+fn add_tendon_servo_blocks(model: &Model, ws: &mut Workspace, h: f64) {
+    let t = &model.topology;
+    for a in 0..model.actuators.len() {
+        let Some((terms, d)) = tendon_servo(model, &ws.tendon_damping, a) else {
+            continue;
+        };
+        for &(ja, da, ca) in terms {
+            for &(jb, db, cb) in terms {
+                let (joint_a, joint_b) = (&model.joints[ja], &model.joints[jb]);
+                let ra = ws.free_adr[ja] + 12 * da;
+                let rb = ws.free_adr[jb] + 12 * db;
+                for (sa, ba) in [(0, joint_a.parent), (1, joint_a.child)] {
+                    for (sb, bb) in [(0, joint_b.parent), (1, joint_b.child)] {
+                        let (Some(na), Some(nb)) = (body_node(ba), body_node(bb)) else {
+                            continue;
+                        };
+                        let off = match (ba == bb, t.pattern.block(na, nb)) {
+                            (true, _) => t.body_diag[ba],
+                            (false, Some(off)) => off,
+                            (false, None) => {
+                                debug_assert!(false, "tendon servo bodies {ba}, {bb}: no block");
+                                continue;
+                            }
+                        };
+                        let scale = h * d * ca * cb;
+                        for r in 0..6 {
+                            let x = scale * ws.free_jac[ra + 6 * sa + r];
+                            for c in 0..6 {
+                                ws.matrix.values[off + 6 * r + c] +=
+                                    x * ws.free_jac[rb + 6 * sb + c];
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -635,6 +745,7 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace) {
     for (ji, joint) in model.joints.iter().enumerate() {
         assemble_joint(model, ws, ji, joint, h);
     }
+    add_tendon_servo_blocks(model, ws, h);
     super::coupling::assemble(model, ws, h);
     if t.has_cones {
         let w = std::mem::take(&mut ws.w);
