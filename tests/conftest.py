@@ -70,3 +70,23 @@ def x0_of(model, qvel_scale=0.5):
     s = model.make_state()
     rng = np.random.default_rng(1)
     return np.concatenate([s.qpos, qvel_scale * rng.normal(size=model.nv)])
+
+
+def beside_mujoco(model, state, mj, ctrls):
+    """Step `model` from `state` and MuJoCo's `mj` (an `MjModel` of the same MJCF, from its
+    first keyframe if it has one, else qpos0 at rest) under the same controls, one row of
+    `ctrls` a step. Returns ukemi's last state, MuJoCo's data, and the largest qpos gap over
+    the run (hinge and slide models: plain differences). Every ukemi step must converge."""
+    import mujoco
+
+    data = mujoco.MjData(mj)
+    if mj.nkey:
+        mujoco.mj_resetDataKeyframe(mj, data, 0)
+    worst = 0.0
+    for u in ctrls:
+        state, info = ukemi.step(model, state, u)
+        assert info.converged
+        data.ctrl[:] = u
+        mujoco.mj_step(mj, data)
+        worst = max(worst, np.abs(state.qpos[:mj.nq] - data.qpos).max())
+    return state, data, worst

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import ukemi
+from conftest import beside_mujoco
 
 mujoco = pytest.importorskip("mujoco")
 pytest.importorskip("gymnasium")
@@ -519,16 +520,8 @@ def test_dampratio_servos_follow_mujoco():
         model = ukemi.Model.from_xml_string(xml)
         mj = mujoco.MjModel.from_xml_string(xml)
         mj.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-        d = mujoco.MjData(mj)
-        s = model.make_state()
         u = np.array([0.5, -0.4, 0.2, 0.1][:model.nu])
-        worst = 0.0
-        for _ in range(300):
-            s, info = ukemi.step(model, s, u)
-            assert info.converged
-            d.ctrl[:] = u
-            mujoco.mj_step(mj, d)
-            worst = max(worst, np.abs(s.qpos - d.qpos).max())
+        s, d, worst = beside_mujoco(model, model.make_state(), mj, [u] * 300)
         assert np.abs(s.qpos - d.qpos).max() < 1e-6
         return worst
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import ukemi
+from conftest import beside_mujoco
 from ukemi.bench import robots
 
 PANDA = Path(__file__).resolve().parents[2] / "shared" / "models" / "panda.xml"
@@ -60,8 +61,9 @@ def test_panda_step_135_has_gradients():
 
 
 def _panda_and_mujoco():
-    """The shared Panda at dt = 0.01 in ukemi and in MuJoCo (its own `implicitfast`
-    integrator, which the MJCF asks for), both at the `home` keyframe."""
+    """The shared Panda at dt = 0.01 in ukemi (with its state at the `home` keyframe) and in
+    MuJoCo (its own `implicitfast` integrator, which the MJCF asks for; `beside_mujoco` starts
+    it at the same keyframe)."""
     mujoco = pytest.importorskip("mujoco")
     if not PANDA.exists():
         pytest.skip(f"{PANDA} is absent (shared models live beside the repository)")
@@ -71,9 +73,8 @@ def _panda_and_mujoco():
     mj = mujoco.MjModel.from_xml_path(str(PANDA))
     mj.opt.timestep = 0.01
     assert mj.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    data = mujoco.MjData(mj)
-    mujoco.mj_resetDataKeyframe(mj, data, 0)
-    return model, model.make_state(key="home"), mujoco, mj, data
+    assert mj.nkey and mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_KEY, 0) == "home"
+    return model, model.make_state(key="home"), mj
 
 
 HOME_CTRL = np.array([0, 0, 0, -1.57079, 0, 1.57079, -0.7853, 255.0])
@@ -84,12 +85,8 @@ def test_panda_holds_its_home_pose_as_mujoco_does():
     explicitly at dt = 0.01 they shook the arm held at its home pose at ±3.5 rad/s (as MuJoCo's
     Euler integrator does). Their velocity gain is implicit (`actuation::split_force`): the arm
     settles where MuJoCo's `implicitfast` settles it, and stays."""
-    model, s, mujoco, mj, data = _panda_and_mujoco()
-    for _ in range(200):
-        s, info = ukemi.step(model, s, HOME_CTRL)
-        assert info.converged
-        data.ctrl[:] = HOME_CTRL
-        mujoco.mj_step(mj, data)
+    model, s, mj = _panda_and_mujoco()
+    s, data, _ = beside_mujoco(model, s, mj, [HOME_CTRL] * 200)
     assert np.abs(s.qvel[:7]).max() < 1e-6
     np.testing.assert_allclose(s.qpos[:7], data.qpos[:7], atol=1e-3)
 
@@ -99,15 +96,8 @@ def test_panda_servo_step_response_follows_mujoco():
     their 12 N·m): the joints follow MuJoCo's `implicitfast` trajectory on the same MJCF to
     the integrators' difference (measured: at most 0.027 rad over 1.5 s, 2e-3 rad at the end;
     with the explicit velocity gain the arm shook by tenths of a radian)."""
-    model, s, mujoco, mj, data = _panda_and_mujoco()
+    model, s, mj = _panda_and_mujoco()
     target = HOME_CTRL + np.array([0.3, 0.2, -0.3, 0.3, 0.4, -0.3, 0.5, 0.0])
-    worst = 0.0
-    for k in range(150):
-        u = target if k >= 10 else HOME_CTRL
-        s, info = ukemi.step(model, s, u)
-        assert info.converged
-        data.ctrl[:] = u
-        mujoco.mj_step(mj, data)
-        worst = max(worst, np.abs(s.qpos[:7] - data.qpos[:7]).max())
+    s, data, worst = beside_mujoco(model, s, mj, [HOME_CTRL] * 10 + [target] * 140)
     assert worst < 0.05
     np.testing.assert_allclose(s.qpos[:7], data.qpos[:7], atol=5e-3)
