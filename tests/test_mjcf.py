@@ -530,3 +530,20 @@ def test_dampratio_servos_follow_mujoco():
     with pytest.raises(ukemi.MjcfError, match="kv and dampratio"):
         ukemi.Model.from_xml_string(
             DAMPRATIO_ARM.format(tendon="").replace('dampratio="1"', 'dampratio="1" kv="2"'))
+
+
+def test_inherited_control_ranges_match_mujoco():
+    """`<position inheritrange>`: ukemi's control ranges are MuJoCo's on the same MJCF (the
+    joint's or tendon's range about its centre, scaled; degrees converted)."""
+    xml = """<mujoco><worldbody><body name="a"><joint name="j" axis="0 1 0" range="-1 2" limited="true"/>
+      <geom size="0.1" mass="1"/><body name="b"><joint name="s" type="slide" range="0 0.04"/>
+      <geom size="0.1" mass="1"/></body></body></worldbody>
+      <tendon><fixed name="t" range="0 0.3" limited="true"><joint joint="j" coef="0.5"/></fixed></tendon>
+      <actuator><position joint="j" kp="10" inheritrange="1"/><position joint="j" kp="10" inheritrange="0.5"/>
+        <position joint="s" kp="10" inheritrange="2"/><position tendon="t" kp="10" inheritrange="1"/>
+      </actuator></mujoco>"""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ours = np.array(ukemi.Model.from_xml_string(xml).actuator_ctrlrange)
+    theirs = mujoco.MjModel.from_xml_string(xml).actuator_ctrlrange
+    np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-15)

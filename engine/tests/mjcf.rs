@@ -274,3 +274,52 @@ fn a_damping_ratio_becomes_the_velocity_gain_of_the_reflected_inertia() {
     let e = both.unwrap_err().to_string();
     assert!(e.contains("kv and dampratio"), "{e}");
 }
+
+/// `<position inheritrange>` (MuJoCo): the control range is the joint's (or fixed tendon's)
+/// range about its centre, scaled — degrees converted as the joint's range is. MuJoCo 4.0.0
+/// compiles these to the ranges asserted here; `ctrlrange` with it is an error, and so is a
+/// joint without a range.
+#[test]
+fn an_inherited_control_range_is_the_scaled_joint_or_tendon_range() {
+    let xml = |act: &str| {
+        format!(
+            r#"<mujoco><worldbody><body name="a"><joint name="j" axis="0 1 0" range="-1 2" limited="true"/>
+            <geom size="0.1" mass="1"/><body name="b"><joint name="s" type="slide" range="0 0.04"/>
+            <geom size="0.1" mass="1"/></body><body name="c" pos="1 0 0"><joint name="free_hinge"/>
+            <geom size="0.1"/></body></body></worldbody>
+            <tendon><fixed name="t" range="0 0.3" limited="true"><joint joint="j" coef="0.5"/></fixed></tendon>
+            <actuator>{act}</actuator></mujoco>"#
+        )
+    };
+    let range = |act: &str| load(&xml(act)).model.actuators[0].ctrlrange.unwrap();
+    let close =
+        |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).abs() < 1e-12 && (a.1 - b.1).abs() < 1e-12;
+    let deg = std::f64::consts::PI / 180.0;
+    assert!(close(
+        range(r#"<position joint="j" kp="10" inheritrange="1"/>"#),
+        (-deg, 2.0 * deg)
+    ));
+    let half = range(r#"<position joint="j" kp="10" inheritrange="0.5"/>"#);
+    assert!(close(half, (-0.25 * deg, 1.25 * deg)), "{half:?}");
+    assert!(close(
+        range(r#"<position joint="s" kp="10" inheritrange="2"/>"#),
+        (-0.02, 0.06)
+    ));
+    assert!(close(
+        range(r#"<position tendon="t" kp="10" inheritrange="1"/>"#),
+        (0.0, 0.3)
+    ));
+    for (act, what) in [
+        (
+            r#"<position joint="j" kp="10" inheritrange="1" ctrlrange="0 1"/>"#,
+            "ctrlrange and inheritrange",
+        ),
+        (
+            r#"<position joint="free_hinge" kp="10" inheritrange="1"/>"#,
+            "needs a limited joint",
+        ),
+    ] {
+        let e = load_str(&xml(act), "<t>").unwrap_err().to_string();
+        assert!(e.contains(what), "{e}");
+    }
+}

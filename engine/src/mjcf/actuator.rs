@@ -11,13 +11,25 @@ use crate::model::Keyframe;
 use crate::model::{CouplingSpec, TransmissionSpec};
 use crate::{ActuatorSpec, JointKind, JointSpec, ModelBuilder, Result};
 
+/// A position servo whose control range its joint's or tendon's range gives
+/// ([`resolve_inherited_ranges`]): the actuator's index, `inheritrange`, the tendon's name
+/// (none for a joint), and the element (for errors).
+pub(super) struct InheritRange<'a, 'i> {
+    actuator: usize,
+    scale: f64,
+    tendon: Option<String>,
+    node: Node<'a, 'i>,
+}
+
 pub(super) fn read_actuators<'a, 'i>(
     ctx: &mut Ctx<'a, 'i>,
     node: Node<'a, 'i>,
     tree: &Tree,
     tendons: &Tendons,
     b: &mut ModelBuilder,
+    inherit: &mut Vec<InheritRange<'a, 'i>>,
 ) -> Result<()> {
+    let first = b.actuator_count();
     for (i, a) in elements(node).enumerate() {
         let tag = a.tag_name().name();
         if !["motor", "position", "velocity", "general"].contains(&tag) {
@@ -60,6 +72,27 @@ pub(super) fn read_actuators<'a, 'i>(
             }
         };
         let ctrlrange = range(ctx, "ctrlrange", "ctrllimited")?;
+        let scale = match tag {
+            "position" => ctx.num(a, &class, "inheritrange", 0.0)?,
+            _ => 0.0,
+        };
+        if scale < 0.0 {
+            return Err(ctx.err(
+                a,
+                format!("attribute `inheritrange` = {scale}: must be >= 0"),
+            ));
+        }
+        if scale > 0.0 {
+            if ctx.nums(a, &class, "ctrlrange", 2)?.is_some() {
+                return Err(ctx.err(a, "ctrlrange and inheritrange cannot both be defined"));
+            }
+            inherit.push(InheritRange {
+                actuator: first + i,
+                scale,
+                tendon: a.attribute("tendon").map(str::to_string),
+                node: a,
+            });
+        }
         let forcerange = range(ctx, "forcerange", "forcelimited")?;
         let (gain, bias) = gain_bias(ctx, a, &class, tag)?;
         if matches!(transmission, TransmissionSpec::Site { .. })
@@ -148,10 +181,14 @@ fn gain_bias<'a, 'i>(
     class: &str,
     tag: &str,
 ) -> Result<(f64, [f64; 3])> {
-    for t in ["timeconst", "inheritrange"] {
-        if a.attribute(t).is_some_and(|v| v.trim() != "0") {
-            return Err(ctx.unsupported(a, format!("actuator attribute `{t}`")));
-        }
+    if a.attribute("timeconst").is_some_and(|v| v.trim() != "0") {
+        return Err(ctx.unsupported(a, "actuator attribute `timeconst`"));
+    }
+    if tag != "position" && a.attribute("inheritrange").is_some_and(|v| v.trim() != "0") {
+        return Err(ctx.unsupported(
+            a,
+            format!("`inheritrange` on <{tag}> (position servos have it)"),
+        ));
     }
     Ok(match tag {
         "motor" => (1.0, [0.0; 3]),
@@ -515,4 +552,43 @@ fn joint_space_inertia(
         }
     }
     Ok(m)
+}
+
+/// MuJoCo's `inheritrange` of position servos: the control range is the centre of the joint's
+/// (or fixed tendon's) range ± `inheritrange` times its half-width, in the servo's units (the
+/// compiled joint limits, radians for hinges). A joint or tendon without a range is an error.
+pub(super) fn resolve_inherited_ranges(
+    ctx: &Ctx,
+    model: &mut crate::Model,
+    inherit: &[InheritRange],
+) -> Result<()> {
+    use crate::model::Transmission;
+    for r in inherit {
+        let act = &model.actuators[r.actuator];
+        let range = match (&act.transmission, &r.tendon) {
+            (Transmission::Joint { joint, dof }, _) => model.joints[*joint]
+                .limits
+                .iter()
+                .find(|l| l.0 == *dof)
+                .map(|l| (l.1, l.2)),
+            (Transmission::Tendon(_), Some(name)) => model
+                .tendon_limits
+                .iter()
+                .find(|t| &t.name == name)
+                .map(|t| t.range),
+            _ => None,
+        };
+        let Some((lo, hi)) = range else {
+            return Err(ctx.err(
+                r.node,
+                format!(
+                    "actuator {:?}: `inheritrange` needs a limited joint or tendon range",
+                    act.name
+                ),
+            ));
+        };
+        let (centre, half) = (0.5 * (lo + hi), 0.5 * (hi - lo) * r.scale);
+        model.actuators[r.actuator].ctrlrange = Some((centre - half, centre + half));
+    }
+    Ok(())
 }

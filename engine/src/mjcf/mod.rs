@@ -10,7 +10,8 @@
 //! tendons as actuator transmissions and, when limited, as hard tendon limits (inequalities
 //! solved with the contacts), `actuator` motor/position/velocity/general on joints, fixed
 //! tendons and sites (with `forcerange`, and a position servo's `dampratio` turned into its
-//! velocity gain at qpos0 as MuJoCo does), and `keyframe`.
+//! velocity gain at qpos0 and its `inheritrange` into its control range, as MuJoCo does), and
+//! `keyframe`.
 //!
 //! Anything else is an [`Error::Unsupported`] or an [`Error::Mjcf`] naming the element and its
 //! line, or — where ignoring it only drops an effect ukemi does not model (solver settings,
@@ -111,9 +112,12 @@ pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
     read_option(&mut ctx, root, &mut b)?;
     let tree = read_tree(&mut ctx, root, &mut b)?;
     let tendons = tendon::read_tendons(&mut ctx, root, &tree, &mut b)?;
+    let mut inherit = Vec::new();
     for node in elements(root) {
         match node.tag_name().name() {
-            "actuator" => actuator::read_actuators(&mut ctx, node, &tree, &tendons, &mut b)?,
+            "actuator" => {
+                actuator::read_actuators(&mut ctx, node, &tree, &tendons, &mut b, &mut inherit)?
+            }
             "equality" => actuator::read_equality(&mut ctx, node, &tree, &mut b)?,
             "contact" => actuator::read_contact(&mut ctx, node, &tree, &mut b)?,
             "sensor" => ctx.warn(node, "sensors are not loaded"),
@@ -128,6 +132,7 @@ pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
     let mut model = b.compile().map_err(|e| locate(&ctx, e))?;
     actuator::resolve_dampratios(&mut model)
         .map_err(|e| crate::Error::model("actuator", "dampratio", e))?;
+    actuator::resolve_inherited_ranges(&ctx, &mut model, &inherit)?;
     if let Some(k) = elements(root).find(|n| n.tag_name().name() == "keyframe") {
         model.keyframes = actuator::read_keyframes(&ctx, k, &model.qpos0, model.nv, model.nu())?;
     }

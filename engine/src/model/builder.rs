@@ -325,6 +325,10 @@ impl ModelBuilder {
     pub fn add_joint(&mut self, j: JointSpec) {
         self.joints.push(j);
     }
+    /// How many actuators have been added.
+    pub fn actuator_count(&self) -> usize {
+        self.actuators.len()
+    }
     /// Add an actuator.
     pub fn add_actuator(&mut self, a: ActuatorSpec) {
         self.actuators.push(a);
