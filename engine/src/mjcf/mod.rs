@@ -281,6 +281,10 @@ fn read_option<'a, 'i>(
                 "density" | "viscosity" | "wind" if a.value().split_whitespace().any(|v| v.parse::<f64>() != Ok(0.0)) => {
                     ctx.warn(node, format!("option `{}` = {:?} ignored: ukemi has no fluid forces", a.name(), a.value()));
                 }
+                // (ukemi's variational integrator takes dampers and servos' velocity gains at
+                // the next velocity, as MuJoCo's `implicitfast` does: the choice MJCF files
+                // make for stiff servos, and a stable one for those that ask for Euler)
+                "integrator" => ctx.warn(node, format!("option `integrator` = {:?} is ignored: ukemi's variational integrator is used (dampers and servo velocity gains implicit, as in MuJoCo's implicitfast)", a.value())),
                 other => ctx.warn(node, format!("option `{other}` is ignored (ukemi's own integrator and interior-point solver are used)")),
             }
         }
