@@ -381,3 +381,43 @@ def test_a_snapshot_restores_a_state_and_its_future_bit_for_bit():
     bad[5] = np.nan
     with pytest.raises(ValueError, match=r"snapshot\[5\]"):
         m.state_from_snapshot(bad)
+
+
+def test_builder_servos_are_mujocos_position_and_velocity_actuators():
+    """`ModelBuilder.add_actuator(kp=, kv=, forcerange=)`: a pendulum on a stiff position servo
+    (h kv / I = 5 at h = 0.01, unstable if its velocity gain were explicit) built in Python
+    steps as the same pendulum read from MJCF with `<position kp kv forcerange>`, and follows
+    MuJoCo's `implicitfast` on that MJCF; a velocity servo likewise. Bad gains name the field."""
+    mujoco = pytest.importorskip("mujoco")
+    from conftest import beside_mujoco
+
+    def built(**servo):
+        b = ukemi.ModelBuilder(timestep=0.01)
+        b.add_body("bob", mass=1.0, inertia=(1e-3, 1e-3, 1e-3), pos=(0, 0, -1))
+        b.add_joint("hinge", kind="revolute", parent="world", child="bob", axis=(0, 1, 0),
+                    child_anchor=(0, 0, 1))
+        b.add_actuator("servo", joint="hinge", **servo)
+        return b.compile()
+
+    xml = """<mujoco><option timestep="0.01"/><worldbody><body name="bob" pos="0 0 -1">
+      <joint name="hinge" type="hinge" axis="0 1 0" pos="0 0 1"/>
+      <inertial pos="0 0 0" mass="1" diaginertia="1e-3 1e-3 1e-3"/></body></worldbody>
+      <actuator>{}</actuator></mujoco>"""
+    cases = [(dict(kp=300.0, kv=500.0, forcerange=(-200.0, 200.0)),
+              '<position joint="hinge" kp="300" kv="500" forcelimited="true" forcerange="-200 200"/>'),
+             (dict(kv=50.0), '<velocity joint="hinge" kv="50"/>')]
+    for servo, act in cases:
+        ours, from_xml = built(**servo), ukemi.Model.from_xml_string(xml.format(act))
+        mj = mujoco.MjModel.from_xml_string(xml.format(act))
+        mj.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        ctrls = [np.array([0.8])] * 200
+        a, d, worst = beside_mujoco(ours, ours.make_state(), mj, ctrls)
+        b, _, _ = beside_mujoco(from_xml, from_xml.make_state(), mj, ctrls)
+        np.testing.assert_allclose(a.qpos, b.qpos, atol=1e-12)
+        np.testing.assert_allclose(a.qvel, b.qvel, atol=1e-10)
+        assert worst < 5e-3, (servo, worst)
+    assert np.abs(a.qvel).max() > 0.5  # the velocity servo spins the pendulum at its target
+    with pytest.raises(ValueError, match="kp"):
+        built(kp=-1.0)
+    with pytest.raises(ValueError, match="forcerange"):
+        built(kp=1.0, forcerange=(2.0, 1.0))

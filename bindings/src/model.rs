@@ -77,6 +77,8 @@ impl PyModelBuilder {
         Ok(())
     }
 
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (name, joint, dof, gear, ctrlrange, kp=0.0, kv=0.0, forcerange=None))]
     fn add_actuator(
         &mut self,
         name: String,
@@ -84,9 +86,20 @@ impl PyModelBuilder {
         dof: usize,
         gear: f64,
         ctrlrange: Option<(f64, f64)>,
+        kp: f64,
+        kv: f64,
+        forcerange: Option<(f64, f64)>,
     ) {
         let mut spec = ActuatorSpec::motor(&name, &joint, dof, gear);
         spec.ctrlrange = ctrlrange;
+        spec.forcerange = forcerange;
+        // MuJoCo's shortcuts: a position servo `kp (u - L) - kv L̇`, a velocity servo
+        // `kv (u - L̇)`, with `L = gear q`
+        if kp != 0.0 {
+            (spec.gain, spec.bias) = (kp, [0.0, -kp, -kv]);
+        } else if kv != 0.0 {
+            (spec.gain, spec.bias) = (kv, [0.0, 0.0, -kv]);
+        }
         self.inner.add_actuator(spec);
     }
 
