@@ -421,3 +421,44 @@ def test_builder_servos_are_mujocos_position_and_velocity_actuators():
         built(kp=-1.0)
     with pytest.raises(ValueError, match="forcerange"):
         built(kp=1.0, forcerange=(2.0, 1.0))
+
+
+def test_builder_frictionloss_is_mujocos_dry_joint_friction():
+    """`ModelBuilder.add_joint(frictionloss=)`: a slider pushed by 5 N against 3 N of friction
+    accelerates at (5 - 3) / m, as from MJCF `frictionloss` and in MuJoCo; pushed by 2 N it
+    stays put (MuJoCo's soft friction creeps); the friction impulse is reported; bad values
+    name the field."""
+    mujoco = pytest.importorskip("mujoco")
+
+    def built(f):
+        b = ukemi.ModelBuilder(timestep=0.01, gravity=(0, 0, 0))
+        b.add_body("m", mass=2.0, inertia=(0.1, 0.1, 0.1))
+        b.add_joint("slider", kind="prismatic", parent="world", child="m", axis=(1, 0, 0),
+                    frictionloss=f)
+        b.add_actuator("push", joint="slider")
+        return b.compile()
+
+    xml = """<mujoco><option timestep="0.01" gravity="0 0 0"/><worldbody><body name="m">
+      <joint name="slider" type="slide" axis="1 0 0" frictionloss="3"/>
+      <inertial pos="0 0 0" mass="2" diaginertia="0.1 0.1 0.1"/></body></worldbody>
+      <actuator><motor joint="slider"/></actuator></mujoco>"""
+    ours, from_xml = built(3.0), ukemi.Model.from_xml_string(xml)
+    mj = mujoco.MjModel.from_xml_string(xml)
+    for push, accel in ((5.0, 1.0), (2.0, 0.0)):
+        a = ukemi.rollout(ours, ours.make_state(), ctrls=np.full((100, 1), push))
+        b = ukemi.rollout(from_xml, from_xml.make_state(), ctrls=np.full((100, 1), push))
+        np.testing.assert_array_equal(a.qpos, b.qpos)
+        np.testing.assert_allclose(a.qvel[-1, 0], accel * 1.0, atol=1e-6)
+        d = mujoco.MjData(mj)
+        d.ctrl[:] = push
+        for _ in range(100):
+            mujoco.mj_step(mj, d)
+        if accel:
+            np.testing.assert_allclose(d.qvel[0], accel, atol=1e-9)
+        else:
+            assert abs(a.qpos[-1, 0]) < 1e-6 < abs(d.qpos[0])
+    state, _ = ukemi.step(ours, ours.make_state(), [5.0])
+    np.testing.assert_allclose(state.joint_friction_impulse, [3.0 * 0.01], rtol=1e-6)
+    assert dict(built(0.0).variable_counts)["joint_friction"] == 0
+    with pytest.raises(ValueError, match="frictionloss"):
+        built(-1.0)

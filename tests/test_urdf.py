@@ -295,12 +295,34 @@ def test_mimic_is_unsupported():
         load_urdf(bad, floating=False)
 
 
+def test_dynamics_friction_is_dry_joint_friction():
+    """`<dynamics friction>` becomes the joint's frictionloss, as MuJoCo's URDF import maps it:
+    the shoulder, tilted under gravity with the elbow swinging below it, holds still while its
+    friction exceeds the torques on it, and falls without it."""
+    rub = ARM.replace('<dynamics damping="0.1"/>', '<dynamics damping="0.1" friction="30"/>')
+    assert rub != ARM
+    with pytest.raises(ukemi.UrdfError, match="friction"):
+        load_urdf(rub.replace('friction="30"', 'friction="-1"'), floating=False)
+    held = load_urdf(rub, floating=False)
+    assert dict(held.variable_counts)["joint_friction"] == 4
+    free = load_urdf(ARM, floating=False)
+    assert dict(free.variable_counts)["joint_friction"] == 0
+    q0 = np.full(held.nq, 0.8)
+    for m, moves in ((held, False), (free, True)):
+        tr = ukemi.rollout(m, m.make_state(qpos=q0), nsteps=100)
+        assert tr.converged
+        assert np.abs(tr.qpos[-1, 1] - q0[1]) > 1e-2  # the elbow swings in both
+        travel = np.abs(tr.qpos[:, 0] - q0[0]).max()
+        assert (travel > 1e-2) if moves else (travel < 1e-8), travel
+    state = held.make_state(qpos=q0)
+    state, _ = ukemi.step(held, state)
+    assert 0 < np.abs(state.joint_friction_impulse).max() < 30 * held.timestep
+
+
 def test_warnings_name_what_is_ignored():
-    bad = ARM.replace('<dynamics damping="0.1"/>', '<dynamics damping="0.1" friction="0.3"/>')
     with pytest.warns(UserWarning) as record:
-        ukemi.Model.from_urdf_string(bad, floating=False)
+        ukemi.Model.from_urdf_string(ARM, floating=False)
     messages = [str(w.message) for w in record]
-    assert any("dry friction is ignored" in m for m in messages)
     # warnings of the MJCF stage point at URDF lines (cylinder pairs have no collision kernel)
     pair = next(m for m in messages if "never collide" in m)
     assert pair.startswith("URDF <string>:"), pair

@@ -60,6 +60,7 @@ impl PyModelBuilder {
         spring_ref: Option<Vec<f64>>,
         range: Option<Vec<(f64, f64)>>,
         is_loop: bool,
+        frictionloss: Vec<f64>,
     ) -> PyResult<()> {
         let kind = JointKind::from_name(kind).ok_or_else(|| {
             let names: Vec<&str> = JointKind::ALL.iter().map(|k| k.name()).collect();
@@ -73,6 +74,7 @@ impl PyModelBuilder {
         spec.spring_ref = spring_ref;
         spec.range = range;
         spec.is_loop = is_loop;
+        spec.frictionloss = frictionloss;
         self.inner.add_joint(spec);
         Ok(())
     }

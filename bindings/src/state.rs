@@ -83,6 +83,13 @@ impl PyState {
     fn tendon_impulse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_vec(py, self.inner.tendon_impulse(&self.model))
     }
+    /// Dry-friction impulse of each joint dof with `frictionloss` in the last step (joints in
+    /// model order, their dofs in order; N·s or N·m·s), positive resisting a positive rate:
+    /// `±frictionloss · dt` while the dof slides, less while it sticks, (n friction dofs,).
+    #[getter]
+    fn joint_friction_impulse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.joint_friction_impulse(&self.model))
+    }
     /// Discrete linear momentum (kg·m/s), (3,).
     fn linear_momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_slice(

@@ -342,6 +342,14 @@ fn neutral_ineq_vars(model: &Model) -> Vec<f64> {
     }
     v.extend(std::iter::repeat_n(1.0, 4 * model.nlimit()));
     v.extend(std::iter::repeat_n(1.0, 4 * model.tendon_limits.len()));
+    // dry friction: at rest (equal displacements both ways, 1 rad/s or m/s), τ = 0
+    // (`solver::friction`)
+    let h = model.options.timestep;
+    for joint in &model.joints {
+        for (_, f) in joint.friction_dofs() {
+            v.extend([h, f * h, h, f * h]);
+        }
+    }
     v
 }
 
@@ -407,11 +415,20 @@ impl State {
     /// for hinge terms, per unit of coef): positive pushes the length up off its lower limit.
     /// Shape (n tendon limits,).
     pub fn tendon_impulse(&self, model: &Model) -> Vec<f64> {
-        let start = self.ineq_vars.len() - 4 * model.tendon_limits.len();
-        self.ineq_vars[start..]
+        let end = self.ineq_vars.len() - 4 * model.nfriction();
+        let start = end - 4 * model.tendon_limits.len();
+        self.ineq_vars[start..end]
             .chunks_exact(4)
             .map(|x| x[0] - x[2])
             .collect()
+    }
+
+    /// Dry-friction impulse of each joint dof with `frictionloss` in the last step (joints in
+    /// order, their dofs in order; N·s or N·m·s), positive resisting a positive rate: `±f h`
+    /// while the dof slides, less while it sticks. Shape (n friction dofs,).
+    pub fn joint_friction_impulse(&self, model: &Model) -> Vec<f64> {
+        let start = self.ineq_vars.len() - 4 * model.nfriction();
+        crate::solver::friction::impulses(&self.ineq_vars[start..]).collect()
     }
 }
 

@@ -1147,3 +1147,67 @@ fn tendon_limits_are_tapered_continuously_with_exact_gradients() {
     }
     check_rollout_vjp(&m, &at(0.03, -0.5, 0.1), 3, Some(1e-3));
 }
+
+/// Three hinged links with dry friction and motors: one hinge slides, one sticks, one turns
+/// the other way (each strictly complementary, so the hard step is smooth at this state).
+fn friction_chain() -> Model {
+    let mut b = ModelBuilder::new().timestep(0.01);
+    for i in 0..3 {
+        let (name, parent) = (format!("l{i}"), format!("l{}", i.max(1) - 1));
+        let parent = if i == 0 { "world" } else { parent.as_str() };
+        let pa = if i == 0 { [0.0; 3] } else { [0.0, 0.0, -0.5] };
+        b = b
+            .body(BodySpec::new(&name, 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5 - i as f64]))
+            .joint(
+                JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
+                    .axis([0.0, 1.0, 0.0])
+                    .anchors(pa, [0.0, 0.0, 0.5])
+                    .damping(0.1)
+                    .frictionloss(0.5 + i as f64),
+            )
+            .actuator(ActuatorSpec::motor(
+                &format!("m{i}"),
+                &format!("j{i}"),
+                0,
+                1.0,
+            ));
+    }
+    tight(b.compile().unwrap())
+}
+
+#[test]
+fn dry_joint_friction_jacobians_match_the_step() {
+    let m = friction_chain();
+    let s = moving_state(&m, &[0.3, -0.2, 0.1], &[2.0, 0.0, -1.5]);
+    let ctrl = [0.5, 0.2, -0.3];
+    let mut next = s.clone();
+    step(&m, &mut next, &mut Workspace::new(&m), &ctrl).unwrap();
+    let (v, tau) = (
+        ukemi_engine::qvel(&m, &next),
+        next.joint_friction_impulse(&m),
+    );
+    eprintln!("rates {v:?}, friction impulses {tau:?}");
+    // j0 and j2 slide (impulse at its bound f h), j1 sticks (inside it)
+    assert!(
+        (tau[0] - 0.5e-2).abs() < 1e-9 && (tau[2] + 2.5e-2).abs() < 1e-9,
+        "{tau:?}"
+    );
+    assert!(
+        v[1].abs() < 1e-8 && tau[1].abs() < 1.5e-2 * 0.99,
+        "{v:?} {tau:?}"
+    );
+    let e = check(&m, &s, &ctrl, Coordinates::Minimal, None, 1e-6);
+    eprintln!("dry friction, hard: max rel err {e:e}");
+    for kappa in [1e-4, 1e-6] {
+        let e = check(&m, &s, &ctrl, Coordinates::Minimal, Some(kappa), 1e-5);
+        eprintln!("dry friction kappa {kappa:e}: max rel err {e:e}");
+    }
+    check(&m, &s, &ctrl, Coordinates::Maximal, None, 1e-6);
+    for kappa in [None, Some(1e-4)] {
+        coloured_vs_reference(&m, &s, &ctrl, Coordinates::Minimal, kappa);
+        coloured_vs_reference(&m, &s, &ctrl, Coordinates::Maximal, kappa);
+    }
+    // through sliding, sticking and reversing over a rollout
+    check_rollout_vjp(&m, &s, 8, None);
+    check_rollout_vjp(&m, &s, 8, Some(1e-4));
+}

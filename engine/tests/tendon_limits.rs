@@ -47,7 +47,7 @@ fn length(model: &Model, state: &State) -> f64 {
 fn tendon_limit_holds_carries_the_holding_torque_and_releases() {
     let model = arm(true);
     let counts = model.variable_counts();
-    assert_eq!(counts.last(), Some(&("tendon_limit", 4)));
+    assert!(counts.contains(&("tendon_limit", 4)), "{counts:?}");
     assert_eq!(counts[2], ("joint_limit", 0));
     let h = model.timestep();
     let mut state = State::reference(&model);
@@ -124,7 +124,7 @@ fn upper_tendon_limit_holds_with_a_negative_impulse() {
 fn inside_the_range_the_limited_arm_moves_as_the_free_one() {
     let (free, limited) = (arm(false), arm(true));
     // no inequality variables without a tendon limit: plain Newton
-    assert_eq!(free.variable_counts().last(), Some(&("tendon_limit", 0)));
+    assert!(free.variable_counts().contains(&("tendon_limit", 0)));
     assert!(State::reference(&free).ineq_vars.is_empty());
     let (mut a, mut b) = (State::reference(&free), State::reference(&limited));
     let (mut wa, mut wb) = (Workspace::new(&free), Workspace::new(&limited));

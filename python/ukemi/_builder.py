@@ -86,7 +86,8 @@ class ModelBuilder:
 
     def add_joint(self, name: str, kind: str, parent: str, child: str, axis=(0.0, 0.0, 1.0),
                   parent_anchor=(0.0, 0.0, 0.0), child_anchor=(0.0, 0.0, 0.0), stiffness=0.0,
-                  damping=0.0, spring_ref=None, range=None, loop: bool = False) -> None:
+                  damping=0.0, spring_ref=None, range=None, loop: bool = False,
+                  frictionloss=0.0) -> None:
         """Add a joint between ``parent`` (or ``"world"``) and ``child``.
 
         Args:
@@ -104,6 +105,10 @@ class ModelBuilder:
             range: Limits ``(lower, upper)`` (m or rad): one pair for a one-dof joint or one per
                 free dof. Solved as inequality constraints by the interior-point method.
             loop: The joint closes a kinematic loop (not part of the spanning tree, no qpos).
+            frictionloss: Dry friction, scalar or one per free dof (N or N·m; MuJoCo's
+                ``frictionloss``): the joint resists motion with up to this force, and holds
+                still under any smaller load (a complementarity problem of the interior-point
+                solve, no creep).
         """
         if not isinstance(kind, str):
             raise TypeError(f"`kind` must be a string, got {type(kind).__name__}")
@@ -115,7 +120,7 @@ class ModelBuilder:
                           as_vector("parent_anchor", parent_anchor, 3),
                           as_vector("child_anchor", child_anchor, 3),
                           _per_dof("stiffness", stiffness), _per_dof("damping", damping), ref, rng,
-                          bool(loop))
+                          bool(loop), _per_dof("frictionloss", frictionloss))
 
     def add_actuator(self, name: str, joint: str, gear: float = 1.0, ctrlrange=None,
                      dof: int = 0, kp: float = 0.0, kv: float = 0.0, forcerange=None) -> None:

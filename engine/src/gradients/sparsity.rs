@@ -147,6 +147,7 @@ impl Support {
             if is_touched[joint.parent] || is_touched[joint.child] {
                 nodes.extend(t.joint_node[j]);
                 nodes.extend(t.limit_node[j]);
+                nodes.extend(t.friction_node[j]);
             }
         }
         for (k, blocks) in t.coupling_blocks.iter().enumerate() {

@@ -123,6 +123,10 @@ pub struct Joint {
     pub qpos_ref: Vec<f64>,
     /// Rotor inertia per free dof (MuJoCo's `armature`, kg or kg·m²); empty means none.
     pub armature: Vec<f64>,
+    /// Dry friction per free dof (MuJoCo's `frictionloss`, N or N·m): the largest force the
+    /// joint resists motion with, solved as a complementarity problem in the interior-point
+    /// solve ([`crate::solver::friction`]). Empty means none.
+    pub frictionloss: Vec<f64>,
     /// Hinges about different anchors: `p_{i+1} - p_i` for consecutive hinges, joint frame (m);
     /// empty when all hinges share one anchor. The child anchor is then the last hinge's
     /// ([`offsets`]).
@@ -153,6 +157,18 @@ impl Joint {
     /// Whether any damper acts.
     pub fn has_damper(&self) -> bool {
         self.damping.iter().any(|&d| d != 0.0)
+    }
+    /// The free dofs with dry friction, with their `frictionloss`.
+    pub fn friction_dofs(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.frictionloss
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(|&(_, f)| f > 0.0)
+    }
+    /// Number of free dofs with dry friction.
+    pub fn nfriction(&self) -> usize {
+        self.friction_dofs().count()
     }
     /// Whether any dof has armature (rotor inertia).
     pub fn has_armature(&self) -> bool {

@@ -20,6 +20,8 @@ pub(super) struct JointDef<'a, 'i> {
     pub stiffness: f64,
     pub damping: f64,
     pub armature: f64,
+    /// Dry friction (`frictionloss`, N or N·m).
+    pub frictionloss: f64,
     pub springref: f64,
     pub qpos_ref: f64,
 }
@@ -109,6 +111,7 @@ pub(super) fn parse_joint<'a, 'i>(
         stiffness: num(ctx, "stiffness")?,
         damping: num(ctx, "damping")?,
         armature: num(ctx, "armature")?,
+        frictionloss: num(ctx, "frictionloss")?,
         springref: conv(ctx, num(ctx, "springref")?),
         qpos_ref: conv(ctx, num(ctx, "ref")?),
         name,
@@ -121,16 +124,11 @@ pub(super) fn parse_joint<'a, 'i>(
         ("stiffness", def.stiffness),
         ("damping", def.damping),
         ("armature", def.armature),
+        ("frictionloss", def.frictionloss),
     ] {
         if v < 0.0 {
             return Err(ctx.err(node, format!("attribute `{what}` = {v}: must be >= 0")));
         }
-    }
-    if !free_elem && num(ctx, "frictionloss")? != 0.0 {
-        ctx.warn(
-            node,
-            "`frictionloss` (dry joint friction) is not supported and is ignored",
-        );
     }
     Ok(def)
 }
@@ -216,6 +214,7 @@ pub(super) fn group_joints(
     spec.stiffness = per_dof.iter().map(|j| j.stiffness).collect();
     spec.damping = per_dof.iter().map(|j| j.damping).collect();
     spec.armature = per_dof.iter().map(|j| j.armature).collect();
+    spec.frictionloss = per_dof.iter().map(|j| j.frictionloss).collect();
     if joints.iter().any(|j| j.range.is_some()) {
         if n_free + nball > 0 {
             let j = joints

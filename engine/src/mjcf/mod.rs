@@ -10,12 +10,12 @@
 //! tendons as actuator transmissions and, when limited, as hard tendon limits (inequalities
 //! solved with the contacts), `actuator` motor/position/velocity/general on joints, fixed
 //! tendons and sites (with `forcerange`, and a position servo's `dampratio` turned into its
-//! velocity gain at qpos0 and its `inheritrange` into its control range, as MuJoCo does), and
-//! `keyframe`.
+//! velocity gain at qpos0 and its `inheritrange` into its control range, as MuJoCo does), joint
+//! `frictionloss` (hard dry friction, `solver::friction`), and `keyframe`.
 //!
 //! Anything else is an [`Error::Unsupported`] or an [`Error::Mjcf`] naming the element and its
 //! line, or — where ignoring it only drops an effect ukemi does not model (solver settings,
-//! fluid drag, dry joint friction, passive tendons, sensors) — a warning in
+//! fluid drag, tendon friction, passive tendons, sensors) — a warning in
 //! [`MjcfModel::warnings`]. Soft-contact parameters (`solref`, `solimp`, `margin`, `gap`,
 //! `priority`) do not apply to hard contact and are ignored without a warning.
 //!
@@ -26,7 +26,11 @@
 //!   theirs with `+` (e.g. `rootx+rootz+rooty`); `qpos`/`qvel` are MuJoCo's.
 //! * Geom pairs whose shapes have no collision kernel (e.g. capsule–cylinder) never collide;
 //!   each is reported as a warning.
-//! * Position/velocity servos act at the current configuration (explicit), like springs.
+//! * Servos' position terms act at the current configuration (explicit), like springs; their
+//!   velocity gains at the next velocity (implicit, as in MuJoCo's `implicitfast`).
+//! * Joint `frictionloss` is hard dry friction: a joint held below its friction moves only by the
+//!   solver's complementarity tolerance (MuJoCo's is soft and creeps: `solreffriction`,
+//!   `solimpfriction`, ignored here).
 //! * Fixed-tendon limits are hard inequalities (MuJoCo's are soft: `solreflimit`/`solimplimit`,
 //!   `margin`), like joint limits; limits of spatial tendons are not enforced (a warning).
 //! * `equality/joint` is a hard holonomic constraint (MuJoCo's is soft: `solref`/`solimp`).

@@ -106,6 +106,9 @@ pub struct JointSpec {
     pub qpos_ref: Vec<f64>,
     /// Rotor inertia (MuJoCo's `armature`): one value for every free dof, or one per dof.
     pub armature: Vec<f64>,
+    /// Dry friction (MuJoCo's `frictionloss`, N or N·m): one value for every free dof, or one
+    /// per dof.
+    pub frictionloss: Vec<f64>,
     /// Hinges about different anchors (MuJoCo's sequential joints): `p_{i+1} - p_i` for each
     /// consecutive pair of the `rot_axes` hinges, child body frame (m). `child_anchor` (and
     /// `parent_anchor`) are the first hinge's anchor. Empty: all hinges turn about one point.
@@ -132,6 +135,7 @@ impl JointSpec {
             rot_axes: vec![],
             qpos_ref: vec![],
             armature: vec![],
+            frictionloss: vec![],
             hinge_offsets: vec![],
         }
     }
@@ -154,6 +158,11 @@ impl JointSpec {
     /// Damping (all free dofs).
     pub fn damping(mut self, d: f64) -> Self {
         self.damping = vec![d];
+        self
+    }
+    /// Dry friction (all free dofs): the joint resists motion with up to this force or torque.
+    pub fn frictionloss(mut self, f: f64) -> Self {
+        self.frictionloss = vec![f];
         self
     }
     /// Spring rest position in `qpos` units.
@@ -835,6 +844,10 @@ fn compile_joint(spec: &JointSpec, names: &[&str], bodies: &[Body]) -> Result<Jo
             vec![]
         } else {
             broadcast(&spec.armature, nfree, &f("armature"))?
+        },
+        frictionloss: match spec.frictionloss.is_empty() {
+            true => vec![],
+            false => broadcast(&spec.frictionloss, nfree, &f("frictionloss"))?,
         },
         hinge_offsets: hinge_offsets(spec)?,
         qpos_adr: 0,

@@ -186,8 +186,13 @@ impl Model {
     pub fn nlimit(&self) -> usize {
         self.joints.iter().map(|j| j.limits.len()).sum()
     }
+    /// Number of joint dofs with dry friction (`frictionloss`).
+    pub fn nfriction(&self) -> usize {
+        self.joints.iter().map(|j| j.nfriction()).sum()
+    }
     /// Unknowns of one step per effect: `(name, count)` for body velocities, joint impulses, limit
-    /// variables, contact variables of each model and tendon-limit variables. Effects a scene
+    /// variables, contact variables of each model, tendon-limit and joint-friction variables.
+    /// Effects a scene
     /// does not use count 0.
     pub fn variable_counts(&self) -> Vec<(&'static str, usize)> {
         use crate::contact::ContactModel::*;
@@ -206,6 +211,7 @@ impl Model {
             ("contact_nonlinear_cone", per(Nonlinear)),
             ("contact_linear_cone", per(Linear)),
             ("tendon_limit", 4 * self.tendon_limits.len()),
+            ("joint_friction", 4 * self.nfriction()),
         ]
     }
     /// What node `n` of the Newton matrix's graph is, for messages: a body, a joint, a joint's
@@ -231,6 +237,9 @@ impl Model {
         }
         if let Some(k) = t.tendon_node.iter().position(|&x| x == n) {
             return format!("tendon limit {k}");
+        }
+        if let Some(j) = t.friction_node.iter().position(|&x| x == Some(n)) {
+            return format!("the dry friction of joint '{}'", self.joints[j].name);
         }
         format!("node {n}")
     }

@@ -68,6 +68,13 @@ pub(crate) struct Topology {
     /// Per tendon limit, each distinct moving body of its joints with its (node row, body col)
     /// and (body row, node col) blocks.
     pub tendon_blocks: Vec<Vec<(usize, (usize, usize))>>,
+    /// Node of each joint's dry-friction variables (4 per dof with `frictionloss`:
+    /// `[σ_fw, s_fw, σ_bw, s_bw]`, [`crate::solver::friction`]), numbered after every other
+    /// node and eliminated first, as a leaf.
+    pub friction_node: Vec<Option<usize>>,
+    /// (node row, body col) and (body row, node col) blocks of each friction node for the
+    /// joint's parent and child.
+    pub friction_blocks: Vec<[Option<(usize, usize)>; 2]>,
     /// Node of each contact candidate.
     pub contact_node: Vec<usize>,
     /// Blocks of each contact node for the bodies of geom a and geom b.
@@ -158,6 +165,16 @@ impl Topology {
             tendon_bodies.push(moving_bodies(joints, t.terms.iter().map(|t| t.0)));
             cone_degree += 2;
         }
+        // dry joint friction: leaves numbered last (always live: `for_each_live_range`)
+        let mut friction_node = vec![None; joints.len()];
+        for (j, joint) in joints.iter().enumerate() {
+            if joint.nfriction() > 0 {
+                friction_node[j] = Some(dims.len());
+                leaves.push(dims.len());
+                dims.push(4 * joint.nfriction());
+                cone_degree += 2 * joint.nfriction();
+            }
+        }
         let mut edges = Vec::new();
         for (c, bodies) in coupling_bodies.iter().enumerate() {
             edges.extend(
@@ -174,7 +191,7 @@ impl Topology {
             );
         }
         for (j, joint) in joints.iter().enumerate() {
-            if let Some(n) = limit_node[j] {
+            for n in [limit_node[j], friction_node[j]].into_iter().flatten() {
                 edges.extend(body_node(joint.parent).map(|b| (n, b)));
                 edges.extend(body_node(joint.child).map(|b| (n, b)));
             }
@@ -261,6 +278,14 @@ impl Topology {
                 None => [None, None],
             })
             .collect();
+        let friction_blocks = joints
+            .iter()
+            .enumerate()
+            .map(|(j, joint)| match friction_node[j] {
+                Some(n) => [pair(n, joint.parent), pair(n, joint.child)],
+                None => [None, None],
+            })
+            .collect();
         let coupling_blocks = coupling_bodies
             .iter()
             .enumerate()
@@ -318,6 +343,8 @@ impl Topology {
             coupling_blocks,
             tendon_node,
             tendon_blocks,
+            friction_node,
+            friction_blocks,
             contact_node,
             contact_blocks,
             contact_bodies,

@@ -69,7 +69,7 @@ pub(crate) fn for_each_pair_except(
 
 /// [`for_each_pair_except`], also passing who owns the pair (its activation flag's index): `c`
 /// for contact candidate `c`, `ncontact + j` for a limit of joint `j`, `ncontact + njoint + k`
-/// for tendon limit `k`.
+/// for tendon limit `k`, `ncontact + njoint + ntendon + j` for joint `j`'s dry friction.
 pub(crate) fn for_each_owned_pair(
     model: &Model,
     active: &[bool],
@@ -106,6 +106,16 @@ pub(crate) fn for_each_owned_pair(
         }
         for &(p, d, r) in &LIMIT_PAIRS {
             f(tendons + k, t.pattern.offset(n), p, d, r, false);
+        }
+    }
+    // dry joint friction: always active (owners past the activation flags)
+    let frictions = tendons + t.tendon_node.len();
+    for (j, n) in t.friction_node.iter().enumerate() {
+        let Some(n) = *n else { continue };
+        for i in 0..t.pattern.dim(n) / 4 {
+            for &(p, d, r) in &LIMIT_PAIRS {
+                f(frictions + j, t.pattern.offset(n) + 4 * i, p, d, r, false);
+            }
         }
     }
 }
@@ -181,16 +191,20 @@ pub(crate) fn initialize_from(
                 .map(|(j, n)| n.map(|_| nc + j)),
         )
         .chain((0..t.tendon_node.len()).map(|i| Some(nc + model.njoint() + i)))
+        .chain(t.friction_node.iter().map(|n| n.map(|_| usize::MAX)))
         .flatten();
     let nodes = t
         .contact_node
         .iter()
         .chain(t.limit_node.iter().flatten())
         .chain(&t.tendon_node)
+        .chain(t.friction_node.iter().flatten())
         .map(|&n| (n, t.pattern.dim(n)));
     for ((n, dim), owner) in nodes.zip(owners) {
         let o = t.pattern.offset(n);
-        if from == WarmFrom::Solution && ws.active_solved[owner] {
+        // (dry friction, owner `usize::MAX`, is always active)
+        let solved = ws.active_solved.get(owner).copied().unwrap_or(true);
+        if from == WarmFrom::Solution && solved {
             ws.w[o..o + dim].copy_from_slice(&ws.w_solved[o..o + dim]);
         } else {
             ws.w[o..o + dim].copy_from_slice(&state.ineq_vars[k..k + dim]);
@@ -439,6 +453,7 @@ pub(crate) fn evaluate(
         }
     }
     super::tendon::add_rows(model, ws, w, residual);
+    super::friction::add_rows(model, ws, w, residual);
     let start = super::taper::at_start!(ws);
     let shifts = Shifts {
         kappa,
@@ -623,6 +638,11 @@ fn violations(
             eq(t.pattern.offset(n), &[0, 2], residual, &mut rvio);
         }
     }
+    for n in t.friction_node.iter().flatten() {
+        for i in 0..t.pattern.dim(*n) / 4 {
+            eq(t.pattern.offset(*n) + 4 * i, &[0, 2], residual, &mut rvio);
+        }
+    }
     (rvio, kvio)
 }
 
@@ -715,6 +735,7 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
     }
     assemble_limits(model, ws, w, h);
     super::tendon::assemble(model, ws, w, h);
+    super::friction::assemble(model, ws, w);
 }
 
 /// `∂(row · δx⁺)/∂w` for one body: `[h row_p, row_φ · ∂φ/∂ω]`.
@@ -1087,6 +1108,11 @@ pub(crate) fn store(model: &Model, state: &mut State, ws: &Workspace) {
             let [lo, hi] = ws.limit_slack_now[nl + i];
             x.copy_from_slice(&[0.0, lo, 0.0, hi]);
         }
+        k += dim;
+    }
+    for &n in t.friction_node.iter().flatten() {
+        let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
+        state.ineq_vars[k..k + dim].copy_from_slice(&ws.w[o..o + dim]);
         k += dim;
     }
 }

@@ -6,6 +6,7 @@ pub(crate) mod armature;
 pub(crate) mod central;
 pub(crate) mod coupling;
 pub mod dense;
+pub(crate) mod friction;
 pub mod graph_ldu;
 pub(crate) mod inequality;
 pub(crate) mod ipm;

@@ -201,6 +201,8 @@ pub(crate) fn weight(
             return 1.0;
         };
         s.limit_adr[j] + (o - model.topology.pattern.offset(node)) / 4
+    } else if owner >= nc + nj + model.tendon_limits.len() {
+        return 1.0; // dry joint friction: always within reach
     } else {
         // tendon limits follow the joints' limited coordinates
         s.limit_slack.len() - model.tendon_limits.len() + (owner - nc - nj)

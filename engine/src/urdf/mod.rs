@@ -14,7 +14,8 @@
 //!   normal to `axis`: two slides along `u`, `v` (`u`, `v`, `axis` right-handed, `u` the unit
 //!   vector of the smallest-index world axis orthogonalised against `axis`) then a hinge about
 //!   `axis` (as MoveIt's and Pinocchio's planar joints); `fixed` → merged (below). `<dynamics
-//!   damping>` → joint damping. A `<limit>` with `lower = upper` (URDF's default 0 for both)
+//!   damping>` → joint damping, `<dynamics friction>` → dry joint friction (MuJoCo's
+//!   `frictionloss`, as MuJoCo's URDF import maps it). A `<limit>` with `lower = upper` (URDF's default 0 for both)
 //!   leaves the joint unlimited, with a warning.
 //! * Fixed joints merge the child link into its parent (MuJoCo's `fusestatic`): masses add, the
 //!   COM is the mass-weighted mean, inertias add with the parallel-axis term, and the child's
@@ -29,7 +30,7 @@
 //! * Collision primitives box, cylinder, sphere and capsule (`length` = the cylindrical part);
 //!   a collision mesh is an [`Error::Unsupported`] naming the link. Visual elements (meshes
 //!   included) are skipped. Pairs follow MuJoCo's rules (no parent–child contact).
-//! * Ignored with a warning: joint dry friction, unknown top-level elements. Ignored silently:
+//! * Ignored with a warning: unknown top-level elements. Ignored silently:
 //!   `material`, `transmission`, `gazebo`, `calibration`, `safety_controller`. `<mimic>` is an
 //!   [`Error::Unsupported`].
 //! * Options: MuJoCo's defaults (time step 0.002 s, gravity −9.81 z); change them with
@@ -537,6 +538,9 @@ impl<'r> Emitter<'r> {
         if j.damping > 0.0 {
             let _ = write!(extra, " damping=\"{}\"", j.damping);
         }
+        if j.friction > 0.0 {
+            let _ = write!(extra, " frictionloss=\"{}\"", j.friction);
+        }
         if let Some((lo, hi)) = j.range {
             let _ = write!(extra, " range=\"{lo} {hi}\"");
         }
@@ -556,11 +560,13 @@ impl<'r> Emitter<'r> {
             }
             JointType::Planar => {
                 let (u, v) = plane_basis(&j.axis);
-                let damping = if j.damping > 0.0 {
-                    format!(" damping=\"{}\"", j.damping)
-                } else {
-                    String::new()
-                };
+                let mut damping = String::new();
+                if j.damping > 0.0 {
+                    let _ = write!(damping, " damping=\"{}\"", j.damping);
+                }
+                if j.friction > 0.0 {
+                    let _ = write!(damping, " frictionloss=\"{}\"", j.friction);
+                }
                 for (suffix, kind, a) in [
                     ("x", "slide", u),
                     ("y", "slide", v),

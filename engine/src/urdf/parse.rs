@@ -84,6 +84,8 @@ pub(super) struct Joint {
     pub range: Option<(f64, f64)>,
     pub effort: Option<f64>,
     pub damping: f64,
+    /// `<dynamics friction>`: Coulomb (dry) joint friction, N·m or N.
+    pub friction: f64,
 }
 
 #[derive(Debug)]
@@ -379,17 +381,16 @@ impl Parser<'_> {
                 here(node)
             ));
         }
-        let mut damping = 0.0;
+        let (mut damping, mut friction) = (0.0, 0.0);
         if let Some(d) = children(node, "dynamics").next() {
             damping = self.num(d, "damping")?.unwrap_or(0.0);
             if damping < 0.0 {
                 return Err(self.err(d, format!("attribute `damping` = {damping}: must be >= 0")));
             }
-            if self.num(d, "friction")?.is_some_and(|f| f != 0.0) {
-                warnings.push(format!(
-                    "{}: joint {name:?}: dry friction is ignored (ukemi has no joint friction)",
-                    here(d)
-                ));
+            friction = self.num(d, "friction")?.unwrap_or(0.0);
+            if friction < 0.0 || !friction.is_finite() {
+                let msg = format!("attribute `friction` = {friction}: must be finite and >= 0");
+                return Err(self.err(d, msg));
             }
         }
         if let Some(m) = children(node, "mimic").next() {
@@ -410,6 +411,7 @@ impl Parser<'_> {
             range,
             effort,
             damping,
+            friction,
         })
     }
 }
