@@ -1,6 +1,8 @@
 """Seeded generator of random scenes on a floor: loose bodies, or a mechanism of 1-3 links
 joined by random joint kinds (all 16 of ``ukemi.JOINT_KINDS``, hinge/slide/ball/universal
-drawn most often) with random axes and anchors, and limits on some joints."""
+drawn most often) with random axes and anchors, limits on some joints and, when asked, dry
+friction on about half of them (drawn from a second stream: a scene with friction is
+otherwise the scene without)."""
 
 from __future__ import annotations
 
@@ -86,7 +88,7 @@ def _kind(rng) -> str:
     return pool[int(rng.integers(len(pool)))]
 
 
-def _mechanism(rng, b) -> str:
+def _mechanism(rng, b, rub=None) -> str:
     """A chain of 1-3 links; the first hangs from the world by a random joint (or floats)."""
     nlink = int(rng.integers(1, 4))
     direction = _unit(rng)
@@ -113,17 +115,23 @@ def _mechanism(rng, b) -> str:
             parent = f"l{i - 1}"
             parent_anchor = _rotate_inv(quats[i - 1], anchor - centres[i - 1])
             b.add_exclude(parent, name)  # MuJoCo's parent-child rule
+        # dry friction up to the torque of the link's weight at 0.2 m (or its weight, sliding)
+        friction = 0.0
+        if rub is not None and kind != "floating" and rub.random() < 0.5:
+            friction = float(rub.uniform(0.0, 2.0)) * mass * 9.81 * 0.2
         b.add_joint(f"j{i}", kind, parent, name, axis=tuple(_unit(rng)),
                     parent_anchor=tuple(parent_anchor),
                     child_anchor=tuple(_rotate_inv(quat, anchor - pos)),
-                    range=_limits(rng, kind))
-        kinds.append(kind)
+                    range=_limits(rng, kind), frictionloss=friction)
+        kinds.append(kind + (" with friction" if friction else ""))
     return f"{nlink}-link chain ({', '.join(kinds)})"
 
 
-def random_scene(seed: int):
-    """(model, description) of scene ``seed``: 40% loose bodies, 60% a jointed mechanism."""
+def random_scene(seed: int, joint_friction: bool = False):
+    """(model, description) of scene ``seed``: 40% loose bodies, 60% a jointed mechanism (with
+    ``joint_friction``, dry friction on about half of its joints)."""
     rng = np.random.default_rng(seed)
     b = floor_builder(friction=float(rng.uniform(0.2, 1.0)))
-    desc = _loose_bodies(rng, b) if rng.random() < 0.4 else _mechanism(rng, b)
+    rub = np.random.default_rng([seed, 1]) if joint_friction else None
+    desc = _loose_bodies(rng, b) if rng.random() < 0.4 else _mechanism(rng, b, rub)
     return b.compile(), desc
