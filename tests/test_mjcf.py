@@ -601,3 +601,53 @@ def test_a1_joint_friction_is_mujocos_hardest_friction():
     print(f"\na1 against MuJoCo's hardest friction: |dq| {gaps[0]:.2e} (dt 1e-3), "
           f"{gaps[1]:.2e} (dt 2.5e-4)")
     assert gaps[0] < 1e-3 and gaps[1] < 0.5 * gaps[0], gaps
+
+
+PAIR_SCENE = """<mujoco><option timestep="0.005"/>
+  <default><pair friction="0.3 0.3 0.005 0.0001 0.0001"/></default>
+  <worldbody><geom name="floor" type="plane" size="5 5 0.1" friction="1" {floor}/>
+    <body name="box" pos="0 0 0.1"><freejoint/>
+      <geom name="box" type="box" size="0.1 0.1 0.1" mass="1" friction="1"/></body></worldbody>
+  <contact>{contact}</contact></mujoco>"""
+
+
+@pytest.mark.parametrize("floor, contact", [
+    ("", '<pair geom1="floor" geom2="box"/>'),
+    ('contype="0" conaffinity="0"', '<pair geom1="box" geom2="floor" friction="0.3"/>'),
+    ("", '<exclude body1="world" body2="box"/><pair geom1="floor" geom2="box"/>'),
+])
+def test_contact_pairs_are_mujocos(floor, contact):
+    """`<contact><pair>`: the two geoms collide whatever their bit masks and exclusions, with
+    the pair's friction (its class's `<pair>` default, 0.3) in place of the geoms' (1). A box
+    pushed at 2 m/s slides to rest after v²/(2 μ g) = 0.68 m, as in MuJoCo (whose soft contact
+    sinks ~1 mm and stops it a little sooner)."""
+    xml = PAIR_SCENE.format(floor=floor, contact=contact)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a pair's friction="0.3" alone is isotropic here
+        uk = ukemi.Model.from_xml_string(xml)
+    assert uk.ncontact > 0
+    mj = mujoco.MjModel.from_xml_string(xml)
+    qvel = [2.0, 0, 0, 0, 0, 0]
+    tr = ukemi.rollout(uk, uk.make_state(qvel=qvel), nsteps=200)
+    assert tr.converged
+    d = mujoco.MjData(mj)
+    d.qvel[:] = qvel
+    for _ in range(200):
+        mujoco.mj_step(mj, d)
+    ours, theirs = tr.qpos[-1, 0], d.qpos[0]
+    print(f"\nslid {ours:.4f} m (analytic {4 / (2 * 0.3 * 9.81):.4f}), MuJoCo {theirs:.4f} m")
+    assert abs(ours - 4 / (2 * 0.3 * 9.81)) < 0.01 and abs(ours - theirs) < 0.02
+    assert abs(tr.qpos[-1, 2] - 0.1) < 1e-9  # resting on the floor, not through it
+
+
+def test_contact_pair_errors_and_warnings_name_the_line():
+    xml = PAIR_SCENE.format(floor="", contact='<pair geom1="floor" geom2="nothing"/>')
+    with pytest.raises(ukemi.MjcfError, match=r":6:.*geom2.*unknown geom"):
+        ukemi.Model.from_xml_string(xml)
+    frictionless = PAIR_SCENE.format(floor="", contact='<pair geom1="floor" geom2="box" condim="1"/>')
+    uk = ukemi.Model.from_xml_string(frictionless)
+    tr = ukemi.rollout(uk, uk.make_state(qvel=[2.0, 0, 0, 0, 0, 0]), nsteps=100)
+    np.testing.assert_allclose(tr.qvel[-1, 0], 2.0, atol=1e-9)  # condim 1: no friction
+    aniso = PAIR_SCENE.format(floor="", contact='<pair geom1="floor" geom2="box" friction="0.2 0.5"/>')
+    with pytest.warns(UserWarning, match=r":6:.*anisotropic friction 0.2 / 0.5"):
+        ukemi.Model.from_xml_string(aniso)

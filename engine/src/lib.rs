@@ -51,7 +51,7 @@ pub use joints::coordinates::{qpos, qvel, set_minimal};
 pub use joints::{Joint, JointKind};
 pub use legendre::set_instant_velocity;
 pub use model::{
-    ActuatorSpec, BodySpec, GeomSpec, JointSpec, Keyframe, Model, ModelBuilder, Options,
+    ActuatorSpec, BodySpec, GeomSpec, JointSpec, Keyframe, Model, ModelBuilder, Options, PairSpec,
 };
 pub use state::{IterationRecord, SolveStatus, State, StepReport, Workspace};
 pub use step::{AppliedForces, rollout, step, step_with};

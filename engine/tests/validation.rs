@@ -125,3 +125,48 @@ fn bad_options_are_named() {
     expect_err(good().timestep(0.0), &["timestep", "0.0"]);
     expect_err(good().gravity([0.0, f64::NAN, 0.0]), &["gravity"]);
 }
+
+#[test]
+fn bad_frictionloss_and_contact_pairs_are_named() {
+    use ukemi_engine::{ContactModel, GeomSpec, PairSpec, Shape};
+    let mut b = good();
+    b.add_joint(JointSpec::new("slider", JointKind::Prismatic, "a", "b").frictionloss(-0.5));
+    expect_err(
+        b.body(BodySpec::new("b", 1.0, [0.1; 3])),
+        &["joint[slider].frictionloss", "-0.5", ">= 0"],
+    );
+    let geoms = || {
+        good()
+            .geom(GeomSpec::new("floor", "world", Shape::Plane))
+            .geom(GeomSpec::new("ball", "a", Shape::Sphere { radius: 0.1 }))
+            .geom(GeomSpec::new("cap", "a", Shape::Sphere { radius: 0.05 }))
+    };
+    let pair = |a: &str, b: &str, friction: f64| PairSpec {
+        geom_a: a.into(),
+        geom_b: b.into(),
+        friction,
+        model: ContactModel::Nonlinear,
+    };
+    let mut b = geoms();
+    b.add_pair(pair("floor", "nothing", 0.5));
+    expect_err(b, &["pair[0].geom_b", "nothing", "unknown geom"]);
+    let mut b = geoms();
+    b.add_pair(pair("floor", "ball", -1.0));
+    expect_err(b, &["pair[0].friction", "-1.0"]);
+    let mut b = geoms();
+    b.add_pair(pair("ball", "cap", 0.5));
+    expect_err(
+        b,
+        &["pair[0].geom_b", "cap", "on the body of geom \"ball\""],
+    );
+    // an explicit pair replaces the pair of the rules: one set of candidates, its friction
+    let mut b = geoms();
+    b.add_pair(pair("ball", "floor", 0.2));
+    let m = b.compile().unwrap();
+    let plain = geoms().compile().unwrap();
+    assert_eq!(m.contacts.len(), plain.contacts.len());
+    for c in &m.contacts {
+        let named = |n: &str| m.geoms[c.geom_a].name == n || m.geoms[c.geom_b].name == n;
+        assert_eq!(c.friction, if named("ball") { 0.2 } else { 0.5 });
+    }
+}

@@ -1,6 +1,6 @@
 //! `<actuator>` (motor, position, velocity, general with a joint, fixed-tendon or site
 //! transmission, `forcerange`), `<keyframe>`, `<equality>` (connect and weld as loop-closing
-//! joints, joint as a coupling) and `<contact>` (exclude).
+//! joints, joint as a coupling) and `<contact>` (exclude, pair).
 use nalgebra::Vector3;
 use roxmltree::Node;
 
@@ -9,7 +9,7 @@ use super::parse::{Ctx, elements};
 use super::tendon::Tendons;
 use crate::model::Keyframe;
 use crate::model::{CouplingSpec, TransmissionSpec};
-use crate::{ActuatorSpec, JointKind, JointSpec, ModelBuilder, Result};
+use crate::{ActuatorSpec, ContactModel, JointKind, JointSpec, ModelBuilder, PairSpec, Result};
 
 /// A position servo whose control range its joint's or tendon's range gives
 /// ([`resolve_inherited_ranges`]): the actuator's index, `inheritrange`, the tendon's name
@@ -446,8 +446,13 @@ pub(super) fn read_contact<'a, 'i>(
     b: &mut ModelBuilder,
 ) -> Result<()> {
     for e in elements(node) {
-        if e.tag_name().name() != "exclude" {
-            return Err(ctx.unsupported(e, "contact <pair> is not supported (exclude is)"));
+        match e.tag_name().name() {
+            "exclude" => {}
+            "pair" => {
+                read_pair(ctx, e, b)?;
+                continue;
+            }
+            _ => return Err(ctx.unsupported(e, "element is not supported (pair, exclude are)")),
         }
         let body = |attr: &str| -> Result<usize> {
             let n = e
@@ -590,5 +595,76 @@ pub(super) fn resolve_inherited_ranges(
         let (centre, half) = (0.5 * (lo + hi), 0.5 * (hi - lo) * r.scale);
         model.actuators[r.actuator].ctrlrange = Some((centre - half, centre + half));
     }
+    Ok(())
+}
+
+/// `<contact><pair>`: two named geoms that collide whatever their bit masks, bodies and
+/// exclusions, in place of the pair MuJoCo's rules would make. Its `friction` and `condim`
+/// come from the element or its class's `<pair>` defaults (MuJoCo's: 1 and 3), not from the
+/// geoms. The soft-contact attributes (`solref`, `solimp`, `margin`, `gap`) are ignored, as on
+/// geoms.
+fn read_pair<'a, 'i>(ctx: &mut Ctx<'a, 'i>, e: Node<'a, 'i>, b: &mut ModelBuilder) -> Result<()> {
+    let class = ctx.class_of(e, "main")?;
+    let geom = |attr: &str| -> Result<String> {
+        let n = e
+            .attribute(attr)
+            .ok_or_else(|| ctx.err(e, format!("`{attr}` is required")))?;
+        if !b.has_geom(n) {
+            return Err(ctx.err(e, format!("attribute `{attr}` = {n:?}: unknown geom")));
+        }
+        Ok(n.to_string())
+    };
+    let (geom_a, geom_b) = (geom("geom1")?, geom("geom2")?);
+    let condim = ctx.int(e, &class, "condim", 3)?;
+    if ![1, 3, 4, 6].contains(&condim) {
+        return Err(ctx.err(
+            e,
+            format!("attribute `condim` = {condim}: expected 1, 3, 4 or 6"),
+        ));
+    }
+    if condim > 3 {
+        ctx.warn(
+            e,
+            format!("condim {condim} (torsional/rolling friction) is treated as condim 3"),
+        );
+    }
+    // the element's numbers over its class's, over MuJoCo's (as MuJoCo reads a partial vector)
+    let mut f = vec![1.0, 1.0, 0.005, 0.0001, 0.0001];
+    let layers = [
+        ctx.defaults.lookup(&class, "pair", "friction"),
+        e.attribute("friction").map(str::to_string),
+    ];
+    for v in layers.into_iter().flatten() {
+        let x = ctx.floats(e, "friction", &v)?;
+        if x.is_empty() || x.len() > 5 {
+            return Err(ctx.err(
+                e,
+                format!("attribute `friction` = {v:?}: need 1 to 5 numbers"),
+            ));
+        }
+        f[..x.len()].copy_from_slice(&x);
+    }
+    if f[0] < 0.0 || f[1] < 0.0 {
+        return Err(ctx.err(e, format!("attribute `friction` = {f:?}: must be >= 0")));
+    }
+    if f[1] != f[0] {
+        ctx.warn(
+            e,
+            format!(
+                "anisotropic friction {} / {} is simulated as {} (ukemi's cones are isotropic)",
+                f[0], f[1], f[0]
+            ),
+        );
+    }
+    b.add_pair(PairSpec {
+        geom_a,
+        geom_b,
+        friction: f[0],
+        model: if condim == 1 {
+            ContactModel::Impact
+        } else {
+            ContactModel::Nonlinear
+        },
+    });
     Ok(())
 }

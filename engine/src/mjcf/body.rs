@@ -309,7 +309,7 @@ fn place_geom<'a, 'i>(
     body: usize,
     g: GeomDef,
 ) -> Result<()> {
-    if g.visual() {
+    if g.visual() && !ctx.paired.contains(&g.name) {
         return Ok(());
     }
     let Some(shape) = g.shape() else {

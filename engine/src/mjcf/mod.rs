@@ -5,7 +5,8 @@
 //! `childclass`, the body tree with every orientation form, `inertial`, inertia from geoms
 //! (sphere, capsule, cylinder, box, ellipsoid), hinge/slide/ball/free joints (several joints of
 //! one body become one engine joint with MuJoCo's dofs in MuJoCo's order, each hinge about its
-//! own anchor), geoms with contact bit masks and `condim` 1 or 3, `contact/exclude`, `equality`
+//! own anchor), geoms with contact bit masks and `condim` 1 or 3, `contact/exclude` and
+//! `contact/pair` (friction and condim from the pair or its class, as MuJoCo), `equality`
 //! connect/weld (loop joints) and joint (a polynomial coupling solved with the joints), fixed
 //! tendons as actuator transmissions and, when limited, as hard tendon limits (inequalities
 //! solved with the contacts), `actuator` motor/position/velocity/general on joints, fixed
@@ -95,12 +96,22 @@ pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
         warnings: vec![],
         lines: Default::default(),
         mass_scale: 1.0,
+        paired: Default::default(),
     };
     let root = doc.root_element();
     if root.tag_name().name() != "mujoco" {
         return Err(ctx.err(root, "the root element must be <mujoco>"));
     }
     read_header(&mut ctx, root)?;
+    // geoms an explicit pair collides: kept whatever their bit masks
+    for contact in elements(root).filter(|n| n.tag_name().name() == "contact") {
+        for pair in elements(contact).filter(|n| n.tag_name().name() == "pair") {
+            let names = ["geom1", "geom2"]
+                .into_iter()
+                .filter_map(|a| pair.attribute(a));
+            ctx.paired.extend(names.map(str::to_string));
+        }
+    }
     // settotalmass: measure the total mass with a dry run, then scale
     if let Some(total) = ctx.compiler.total_mass {
         let mut scratch = ModelBuilder::new();

@@ -48,6 +48,8 @@ pub(super) struct Ctx<'a, 'input> {
     pub lines: HashMap<String, usize>,
     /// Scale of every body mass and inertia (`settotalmass`), 1 otherwise.
     pub mass_scale: f64,
+    /// Geoms named by a `<contact><pair>`: kept even when their bit masks make them visual.
+    pub paired: std::collections::HashSet<String>,
 }
 
 /// Actuator element names share one default slot (as in MuJoCo).

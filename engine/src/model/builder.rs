@@ -280,6 +280,21 @@ impl GeomSpec {
     }
 }
 
+/// An explicit contact pair (MuJoCo's `contact/pair`): the two geoms collide with this
+/// friction and contact model whatever their bit masks, bodies and exclusions say, and in
+/// place of the pair those rules would make.
+#[derive(Clone, Debug)]
+pub struct PairSpec {
+    /// First geom's name.
+    pub geom_a: String,
+    /// Second geom's name.
+    pub geom_b: String,
+    /// Coulomb friction coefficient (≥ 0).
+    pub friction: f64,
+    /// Contact model (frictionless where `friction` is 0).
+    pub model: ContactModel,
+}
+
 /// Builds and validates a [`Model`].
 #[derive(Clone, Debug, Default)]
 pub struct ModelBuilder {
@@ -291,6 +306,7 @@ pub struct ModelBuilder {
     geoms: Vec<GeomSpec>,
     excludes: Vec<(String, String)>,
     geom_excludes: Vec<(String, String)>,
+    pairs: Vec<PairSpec>,
     condim_max: bool,
     couplings: Vec<CouplingSpec>,
     tendon_limits: Vec<TendonLimitSpec>,
@@ -369,6 +385,14 @@ impl ModelBuilder {
     pub fn add_geom_exclude(&mut self, geom_a: &str, geom_b: &str) {
         self.geom_excludes
             .push((geom_a.to_string(), geom_b.to_string()));
+    }
+    /// Whether a geom of this name has been added.
+    pub fn has_geom(&self, name: &str) -> bool {
+        self.geoms.iter().any(|g| g.name == name)
+    }
+    /// Collide two geoms explicitly (MuJoCo's `contact/pair`, see [`PairSpec`]).
+    pub fn add_pair(&mut self, p: PairSpec) {
+        self.pairs.push(p);
     }
     /// MuJoCo's pair rule: a pair is frictionless only if *both* geoms ask for
     /// [`ContactModel::Impact`] (MuJoCo's `condim = max`), instead of either.
@@ -551,7 +575,36 @@ impl ModelBuilder {
                     .iter()
                     .any(|&(x, y)| (x == a && y == b) || (x == b && y == a))
         };
+        // explicit pairs first, then the pairs the rules make, less those named explicitly
+        let mut explicit = Vec::with_capacity(self.pairs.len());
+        for (k, p) in self.pairs.iter().enumerate() {
+            let f = |field: &str| format!("pair[{k}].{field}");
+            let find = |n: &String, field: &str| {
+                geoms
+                    .iter()
+                    .position(|g| g.name == *n)
+                    .ok_or_else(|| Error::model(f(field), n, "unknown geom"))
+            };
+            let (a, b) = (find(&p.geom_a, "geom_a")?, find(&p.geom_b, "geom_b")?);
+            ensure!(
+                p.friction.is_finite() && p.friction >= 0.0,
+                Error::model(f("friction"), p.friction, "must be finite and >= 0")
+            );
+            ensure!(
+                geoms[a].body != geoms[b].body,
+                Error::model(
+                    f("geom_b"),
+                    &p.geom_b,
+                    format!("is on the body of geom {:?}", p.geom_a)
+                )
+            );
+            explicit.push(((a.min(b), a.max(b)), p));
+        }
         let mut out = Vec::new();
+        for &((i, j), p) in &explicit {
+            let model = pair_model(p.model, p.model, p.friction);
+            add_candidates(&mut out, geoms, joints, (i, j), p.friction, model)?;
+        }
         for i in 0..geoms.len() {
             for j in i + 1..geoms.len() {
                 let (ga, gb) = (&geoms[i], &geoms[j]);
@@ -561,7 +614,7 @@ impl ModelBuilder {
                 let pair_excluded = self.geom_excludes.iter().any(|(x, y)| {
                     (*x == ga.name && *y == gb.name) || (*x == gb.name && *y == ga.name)
                 });
-                if pair_excluded {
+                if pair_excluded || explicit.iter().any(|e| e.0 == (i, j)) {
                     continue;
                 }
                 let affinity =
@@ -582,31 +635,7 @@ impl ModelBuilder {
                 } else {
                     pair_model(ma, mb, friction)
                 };
-                let (features, swapped) =
-                    geometry::candidates(&ga.shape, &gb.shape).map_err(|e| {
-                        Error::Unsupported(format!(
-                            "contact between geom[{}] and geom[{}]: {e}",
-                            ga.name, gb.name
-                        ))
-                    })?;
-                let (a, b) = if swapped { (j, i) } else { (i, j) };
-                let slide_axes =
-                    crate::contact::slide_pair::slide_axis(joints, geoms[a].body, geoms[b].body)
-                        .map(|[ax, bx]| {
-                            [geoms[a].rot.transpose() * ax, geoms[b].rot.transpose() * bx]
-                        });
-                let slide_limits =
-                    crate::contact::slide_pair::slide_limits(joints, geoms[a].body, geoms[b].body)
-                        .map(std::sync::Arc::from);
-                out.extend(features.into_iter().map(|feature| Contact {
-                    geom_a: a,
-                    geom_b: b,
-                    feature,
-                    model,
-                    friction,
-                    slide_axes,
-                    slide_limits: slide_limits.clone(),
-                }));
+                add_candidates(&mut out, geoms, joints, (i, j), friction, model)?;
             }
         }
         Ok(out)
@@ -653,6 +682,40 @@ impl ModelBuilder {
         }
         Ok(out)
     }
+}
+
+/// The contact candidates of geoms `i` and `j` with this friction and contact model.
+fn add_candidates(
+    out: &mut Vec<Contact>,
+    geoms: &[Geom],
+    joints: &[Joint],
+    (i, j): (usize, usize),
+    friction: f64,
+    model: ContactModel,
+) -> Result<()> {
+    let (ga, gb) = (&geoms[i], &geoms[j]);
+    let (features, swapped) = geometry::candidates(&ga.shape, &gb.shape).map_err(|e| {
+        Error::Unsupported(format!(
+            "contact between geom[{}] and geom[{}]: {e}",
+            ga.name, gb.name
+        ))
+    })?;
+    let (a, b) = if swapped { (j, i) } else { (i, j) };
+    let slide_axes = crate::contact::slide_pair::slide_axis(joints, geoms[a].body, geoms[b].body)
+        .map(|[ax, bx]| [geoms[a].rot.transpose() * ax, geoms[b].rot.transpose() * bx]);
+    let slide_limits =
+        crate::contact::slide_pair::slide_limits(joints, geoms[a].body, geoms[b].body)
+            .map(std::sync::Arc::from);
+    out.extend(features.into_iter().map(|feature| Contact {
+        geom_a: a,
+        geom_b: b,
+        feature,
+        model,
+        friction,
+        slide_axes,
+        slide_limits: slide_limits.clone(),
+    }));
+    Ok(())
 }
 
 /// Frictionless if either geom asks for impact or the pair's friction is 0, else linear if either

@@ -6,7 +6,7 @@ pub(crate) mod params;
 mod topology;
 mod transmission;
 
-pub use builder::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, ModelBuilder};
+pub use builder::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, ModelBuilder, PairSpec};
 pub use options::Options;
 pub(crate) use topology::Topology;
 pub(crate) use topology::body_node as topology_body_node;
