@@ -651,3 +651,31 @@ def test_contact_pair_errors_and_warnings_name_the_line():
     aniso = PAIR_SCENE.format(floor="", contact='<pair geom1="floor" geom2="box" friction="0.2 0.5"/>')
     with pytest.warns(UserWarning, match=r":6:.*anisotropic friction 0.2 / 0.5"):
         ukemi.Model.from_xml_string(aniso)
+
+
+WHEEL = """<mujoco><option timestep="{h}"/><worldbody><body pos="0 0 1">
+  <joint name="axle" type="hinge" axis="0 1 0" stiffness="{k}" springref="{ref}"/>
+  <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.05" contype="0" conaffinity="0"/>
+  </body></worldbody></mujoco>"""
+
+
+@pytest.mark.parametrize("k, ref, v0", [(0.0, 0.0, 15.0), (20.0, 520.0, 0.0)])
+def test_unlimited_hinges_wind_on_as_mujocos(k, ref, v0):
+    """An unlimited hinge's qpos winds on past ±π as MuJoCo's does: a pendulum flung over the
+    top turns over and over (qpos past 4π), and a torsion spring wound to 9.08 rad (springref
+    520°) swings through its turns about it. ukemi's qpos follows MuJoCo's on the same MJCF to
+    the integrators' difference, which shrinks with dt (2 s; spring: 0.25, 0.063 rad at dt
+    1e-3, 5e-4). Before session 40 the angle wrapped to (-π, π] and the spring pulled towards
+    9.08 - 2π."""
+    gaps = []
+    for h in (1e-3, 5e-4):
+        xml = WHEEL.format(h=h, k=k, ref=ref)
+        mj, traj, mq, _ = rollout_both(xml, [0.0], [v0], np.zeros((round(2.0 / h), 0)))
+        gaps.append(np.abs(traj.qpos[1:, 0] - mq[:, 0]).max())
+        assert np.abs(traj.qpos[:, 0]).max() > 4 * np.pi
+    print(f"\nk {k} springref {ref}: qpos {traj.qpos[-1, 0]:.4f} (MuJoCo {mq[-1, 0]:.4f}), "
+          f"range {traj.qpos[:, 0].min():.3f}..{traj.qpos[:, 0].max():.3f}, gaps {gaps}")
+    assert gaps[0] < 0.5 and gaps[1] < 0.5 * gaps[0], gaps
+    # the state's qpos goes back in as it came out, turns included
+    uk = ukemi.Model.from_xml_string(xml)
+    np.testing.assert_allclose(uk.make_state(qpos=traj.qpos[-1]).qpos, traj.qpos[-1], atol=1e-12)

@@ -120,11 +120,17 @@ pub fn spring_energy(model: &Model, state: &State) -> f64 {
     use crate::joints::geometry::{JointFrame, Pose};
     let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
     let mut e = 0.0;
-    for j in model.joints.iter().filter(|j| j.has_spring()) {
+    for (ji, j) in model
+        .joints
+        .iter()
+        .enumerate()
+        .filter(|(_, j)| j.has_spring())
+    {
         let frame = JointFrame::new(j, &pose(j.parent), &pose(j.child));
         let mut q = [0.0; 7];
         let mut f = [0.0; 6];
         frame.coordinates(j, &mut q[..j.nq()]);
+        crate::joints::coordinates::wind(model, state, ji, &mut q[..j.nq()]);
         frame.spring_force(j, &q[..j.nq()], &mut f[..j.nfree()]);
         // ½ k x² = ½ f² / k per dof
         e += (0..j.nfree())

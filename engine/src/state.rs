@@ -25,6 +25,11 @@ pub struct State {
     pub angvel_b: Vec<f64>,
     /// Joint constraint impulses of the last step (N·s), the solver's warm start. Shape (ncon,).
     pub joint_impulse: Vec<f64>,
+    /// Turns of each winding hinge ([`crate::Joint::winds`]), as the multiple of 2π its `qpos`
+    /// adds to the angle its bodies' poses give in (-π, π]: a wheel's angle winds on as
+    /// MuJoCo's does, and its springs and servos see the wound angle. Each step carries the
+    /// turns on (no hinge turns by π in one step: `newton::physical_spin_limit`).
+    pub(crate) winding: Vec<f64>,
     /// Interior-point variables of every contact candidate, then every joint limit, then every
     /// tendon limit (their node layouts, see `solver::inequality`), from the last step.
     pub ineq_vars: Vec<f64>,
@@ -62,6 +67,7 @@ impl State {
         self.quat.copy_from_slice(&other.quat);
         self.com_linvel.copy_from_slice(&other.com_linvel);
         self.angvel_b.copy_from_slice(&other.angvel_b);
+        self.winding.copy_from_slice(&other.winding);
         self.interval = other.interval;
     }
 
@@ -101,6 +107,7 @@ impl State {
             com_linvel: vec![0.0; 3 * n],
             angvel_b: vec![0.0; 3 * n],
             joint_impulse: vec![0.0; model.ncon()],
+            winding: vec![0.0; model.topology.winding_adr.iter().flatten().count()],
             ineq_vars: Vec::new(),
             interval: None,
             topology_id: model.topology_id(),
@@ -114,7 +121,8 @@ impl State {
 
     /// Every number of the state in one flat vector, which [`State::from_snapshot`] turns back
     /// into the same state bit for bit: `[time, interval, com_pos, quat, com_linvel, angvel_b,
-    /// joint_impulse, ineq_vars]` (the interval NaN when unset). Unlike `[qpos, qvel]` it
+    /// joint_impulse, winding, ineq_vars]` (the interval NaN when unset; winding only for
+    /// models with winding hinges). Unlike `[qpos, qvel]` it
     /// keeps the solver's warm start, so a step from the restored state takes the same
     /// iterates: a checkpoint of a run, or a hard step kept as a test fixture.
     pub fn snapshot(&self) -> Vec<f64> {
@@ -187,25 +195,27 @@ impl State {
     }
 
     /// The state's arrays, in [`State::snapshot`]'s order.
-    fn parts(&self) -> [&Vec<f64>; 6] {
+    fn parts(&self) -> [&Vec<f64>; 7] {
         [
             &self.com_pos,
             &self.quat,
             &self.com_linvel,
             &self.angvel_b,
             &self.joint_impulse,
+            &self.winding,
             &self.ineq_vars,
         ]
     }
 
     /// [`State::parts`], mutable.
-    fn parts_mut(&mut self) -> [&mut Vec<f64>; 6] {
+    fn parts_mut(&mut self) -> [&mut Vec<f64>; 7] {
         [
             &mut self.com_pos,
             &mut self.quat,
             &mut self.com_linvel,
             &mut self.angvel_b,
             &mut self.joint_impulse,
+            &mut self.winding,
             &mut self.ineq_vars,
         ]
     }

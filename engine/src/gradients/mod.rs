@@ -187,6 +187,19 @@ fn next_state_into(model: &Model, state: &State, w: &[f64], out: &mut State) {
         out.set_pose(b, &next);
         out.set_velocity(b, &v, &om);
     }
+    for (ji, joint) in model.joints.iter().enumerate() {
+        if let Some(k) = model.topology.winding_adr[ji] {
+            let pose = |b: usize| {
+                if b == 0 {
+                    crate::joints::geometry::Pose::world()
+                } else {
+                    out.pose(b)
+                }
+            };
+            let (p, c) = (pose(joint.parent), pose(joint.child));
+            out.winding[k] = crate::joints::coordinates::turns_after(model, state, ji, &p, &c);
+        }
+    }
     out.time = state.time + h;
 }
 

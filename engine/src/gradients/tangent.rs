@@ -113,6 +113,11 @@ fn joint_difference(j: &crate::joints::Joint, q0: &[f64], q1: &[f64], dq: &mut [
         for i in 0..j.nfree() {
             dq[i] = q1[i] - q0[i];
         }
+        // a winding hinge's angle measured from poses has no turns: differences are small
+        if j.winds() {
+            let a = j.ntrans;
+            dq[a] = crate::joints::geometry::wrap_angle(q1[a] - q0[a]);
+        }
     }
 }
 
@@ -421,5 +426,31 @@ mod tests {
         for i in 0..7 {
             assert!((back[i] - dq[i]).abs() < 1e-12, "{i}: {back:?}");
         }
+    }
+
+    /// A wound hinge (two turns on) measured against its own point: the rows that measure the
+    /// joint from poses alone (`difference_joints`) see no difference, not -2 turns.
+    #[test]
+    fn differences_of_a_wound_hinge_have_no_turns() {
+        let model = ModelBuilder::new()
+            .body(BodySpec::new("b", 1.0, [0.1, 0.2, 0.3]))
+            .joint(JointSpec::new("hinge", JointKind::Revolute, "world", "b"))
+            .compile()
+            .unwrap();
+        let mut state = State::reference(&model);
+        set_minimal(
+            &model,
+            &mut state,
+            &[0.5 + 2.0 * std::f64::consts::TAU],
+            &[1.0],
+        )
+        .unwrap();
+        let point = Point::new(&model, &state, Coordinates::Minimal).unwrap();
+        let mut out = vec![1.0; 2];
+        let mut scratch = vec![0.0; Point::scratch_len(&model)];
+        point.difference_joints(&model, &state, &[true], &mut out, &mut scratch);
+        assert!(out.iter().all(|d| d.abs() < 1e-12), "{out:?}");
+        point.difference(&model, &state, &mut out, &mut scratch);
+        assert!(out.iter().all(|d| d.abs() < 1e-12), "{out:?}");
     }
 }

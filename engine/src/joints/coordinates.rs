@@ -29,19 +29,59 @@ fn velocity_of(state: &State, b: usize) -> [f64; 6] {
     [v[0], v[1], v[2], w[0], w[1], w[2]]
 }
 
+/// Add the turns `state` keeps for joint `ji` ([`super::Joint::winds`]) to its coordinates
+/// `q`, measured from its bodies' poses (the hinge angle in (-π, π]).
+pub(crate) fn wind(model: &Model, state: &State, ji: usize, q: &mut [f64]) {
+    if let Some(k) = model.topology.winding_adr[ji] {
+        q[model.joints[ji].ntrans] += state.winding[k];
+    }
+}
+
+/// A winding hinge's angle (without turns) between the poses `parent` and `child`.
+fn measured_angle(j: &super::Joint, parent: &Pose, child: &Pose) -> f64 {
+    let mut q = [0.0; 7];
+    JointFrame::new(j, parent, child).coordinates(j, &mut q[..j.nq()]);
+    q[j.ntrans]
+}
+
+/// The turns of winding hinge `ji` once its bodies have moved from their poses in `start` to
+/// `parent` and `child`: its angle goes on from the wound one of `start` by less than π
+/// (`newton::physical_spin_limit` bounds each body's turn in a step by √2 rad).
+pub(crate) fn turns_after(
+    model: &Model,
+    start: &State,
+    ji: usize,
+    parent: &Pose,
+    child: &Pose,
+) -> f64 {
+    let j = &model.joints[ji];
+    let Some(k) = model.topology.winding_adr[ji] else {
+        return 0.0;
+    };
+    let before = measured_angle(j, &pose_of(start, j.parent), &pose_of(start, j.child));
+    let wound = before + start.winding[k];
+    let after = measured_angle(j, parent, child);
+    let next = wound + super::geometry::wrap_angle(after - wound);
+    std::f64::consts::TAU * ((next - after) / std::f64::consts::TAU).round()
+}
+
 /// Write `qpos` (length `model.nq`) of `state`.
 pub fn qpos_into(model: &Model, state: &State, out: &mut [f64]) {
-    for j in model.joints.iter().filter(|j| !j.is_loop) {
+    for (ji, j) in model.joints.iter().enumerate().filter(|(_, j)| !j.is_loop) {
         let frame = JointFrame::new(j, &pose_of(state, j.parent), &pose_of(state, j.child));
-        frame.coordinates(j, &mut out[j.qpos_adr..j.qpos_adr + j.nq()]);
+        let q = &mut out[j.qpos_adr..j.qpos_adr + j.nq()];
+        frame.coordinates(j, q);
+        wind(model, state, ji, q);
     }
 }
 
 /// Write `qpos` and `qvel` of `state` (one joint frame per joint for both).
 pub(crate) fn minimal_into(model: &Model, state: &State, qpos: &mut [f64], qvel: &mut [f64]) {
-    for j in model.joints.iter().filter(|j| !j.is_loop) {
+    for (ji, j) in model.joints.iter().enumerate().filter(|(_, j)| !j.is_loop) {
         let frame = JointFrame::new(j, &pose_of(state, j.parent), &pose_of(state, j.child));
-        frame.coordinates(j, &mut qpos[j.qpos_adr..j.qpos_adr + j.nq()]);
+        let q = &mut qpos[j.qpos_adr..j.qpos_adr + j.nq()];
+        frame.coordinates(j, q);
+        wind(model, state, ji, q);
         joint_qvel_in_frame(
             state,
             j,
@@ -197,6 +237,13 @@ fn forward_kinematics(
             quat: child_quat,
         };
         state.set_pose(j.child, &child);
+        // a winding hinge keeps the turns of its qpos beyond the angle its poses give
+        if let Some(k) = model.topology.winding_adr[ji] {
+            let angle = qpos[j.qpos_adr + j.ntrans];
+            let measured = measured_angle(j, &parent, &child);
+            let turns = ((angle - measured) / std::f64::consts::TAU).round();
+            state.winding[k] = std::f64::consts::TAU * turns;
+        }
         // velocities: ω_c = R_jᵀ R_offᵀ ω_p + S qvel_rot;  ȧ_c = ȧ_p + R_pj Δ̇ + ω_p × (R_pj Δ)
         let vp = velocity_of(state, j.parent);
         let (v_p, w_p) = (

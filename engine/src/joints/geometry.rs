@@ -316,6 +316,11 @@ impl JointFrame {
                     out[nt + i] = -joint.stiffness[nt + i] * rv[i];
                 }
             }
+            // a winding hinge's spring sees its turns (coordinates wound by the caller, as
+            // MuJoCo's `qpos`); two or three hinges' angles are in (-π, π]
+            RotDofs::Hinge { .. } => {
+                out[nt] = -joint.stiffness[nt] * (coords[nt] - joint.spring_ref[nt]);
+            }
             rot => {
                 for i in nt..nt + rot.nfree() {
                     out[i] = -joint.stiffness[i] * wrap_angle(coords[i] - joint.spring_ref[i]);

@@ -158,6 +158,15 @@ impl Joint {
     pub fn has_damper(&self) -> bool {
         self.damping.iter().any(|&d| d != 0.0)
     }
+    /// Whether the joint's angle winds on past ±π (MuJoCo's `qpos` does): a single hinge
+    /// without a limit on it, not closing a loop. Its turns are kept in the state
+    /// ([`crate::State`]'s winding); a limited angle is reported on the branch centred on its
+    /// range instead, and two or three hinges in one joint in (-π, π].
+    pub fn winds(&self) -> bool {
+        matches!(self.rot, RotDofs::Hinge { .. })
+            && !self.is_loop
+            && !self.limits.iter().any(|&(dof, _, _)| dof == self.ntrans)
+    }
     /// The free dofs with dry friction, with their `frictionloss`.
     pub fn friction_dofs(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         self.frictionloss

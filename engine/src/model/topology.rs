@@ -68,6 +68,8 @@ pub(crate) struct Topology {
     /// Per tendon limit, each distinct moving body of its joints with its (node row, body col)
     /// and (body row, node col) blocks.
     pub tendon_blocks: Vec<Vec<(usize, (usize, usize))>>,
+    /// Index of each winding hinge's turns in [`crate::State`]'s winding ([`Joint::winds`]).
+    pub winding_adr: Vec<Option<usize>>,
     /// Node of each joint's dry-friction variables (4 per dof with `frictionloss`:
     /// `[σ_fw, s_fw, σ_bw, s_bw]`, [`crate::solver::friction`]), numbered after every other
     /// node and eliminated first, as a leaf.
@@ -345,6 +347,18 @@ impl Topology {
             tendon_blocks,
             friction_node,
             friction_blocks,
+            winding_adr: {
+                let mut k = 0;
+                joints
+                    .iter()
+                    .map(|j| {
+                        j.winds().then(|| {
+                            k += 1;
+                            k - 1
+                        })
+                    })
+                    .collect()
+            },
             contact_node,
             contact_blocks,
             contact_bodies,

@@ -592,7 +592,8 @@ pub(crate) fn record_tendon_start(
     let tendon = &model.tendon_limits[k];
     let (mut len, mut bound, mut rate) = (0.0, 0.0, 0.0);
     for &(ji, dof, coef) in &tendon.terms {
-        let (q, qd) = joint_state(state, &model.joints[ji]);
+        let (mut q, qd) = joint_state(state, &model.joints[ji]);
+        crate::joints::coordinates::wind(model, state, ji, &mut q);
         len += coef * q[dof];
         bound += (coef * qd[dof]).abs();
         rate += coef * qd[dof];

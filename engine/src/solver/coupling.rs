@@ -14,11 +14,14 @@ fn pose_of(state: &State, b: usize) -> Pose {
     if b == 0 { Pose::world() } else { state.pose(b) }
 }
 
-/// Coordinate `dof` of joint `ji` with its free-Jacobian row, at the given poses.
+/// Coordinate `dof` of joint `ji` with its free-Jacobian row, at the given poses; a winding
+/// hinge's angle with the turns that keep it within π of the step's start (`ws.joint_q`, wound
+/// by `newton::prepare_smooth_forces`), so a coupling or tendon over a wheel does not jump by
+/// 2π where the wheel's measured angle wraps.
 pub(super) fn coordinate(
     model: &Model,
-    ji: usize,
-    dof: usize,
+    ws: &Workspace,
+    (ji, dof): (usize, usize),
     parent: &Pose,
     child: &Pose,
 ) -> (f64, [f64; 12]) {
@@ -26,6 +29,10 @@ pub(super) fn coordinate(
     let frame = JointFrame::new(joint, parent, child);
     let mut q = [0.0; 7];
     frame.coordinates(joint, &mut q[..joint.nq()]);
+    if joint.winds() && dof == joint.ntrans {
+        let start = ws.joint_q[ji][dof];
+        q[dof] = start + crate::joints::geometry::wrap_angle(q[dof] - start);
+    }
     let mut jf = [0.0; 6 * 12];
     frame.free_jacobian(joint, &mut jf[..12 * joint.nfree()]);
     let mut row = [0.0; 12];
@@ -34,11 +41,16 @@ pub(super) fn coordinate(
 }
 
 /// Value and slope `∂k/∂x` of coupling `c` at the given poses.
-fn value_at(model: &Model, c: usize, poses: &dyn Fn(usize) -> Pose) -> (f64, f64, [[f64; 12]; 2]) {
+fn value_at(
+    model: &Model,
+    ws: &Workspace,
+    c: usize,
+    poses: &dyn Fn(usize) -> Pose,
+) -> (f64, f64, [[f64; 12]; 2]) {
     let cp = &model.couplings[c];
     let at = |(ji, dof): (usize, usize)| {
         let j = &model.joints[ji];
-        coordinate(model, ji, dof, &poses(j.parent), &poses(j.child))
+        coordinate(model, ws, (ji, dof), &poses(j.parent), &poses(j.child))
     };
     let (y, jy) = at(cp.joint1);
     let (x, jx) = cp.joint2.map_or((0.0, [0.0; 12]), at);
@@ -55,7 +67,7 @@ fn terms(model: &Model, c: usize, slope: f64) -> impl Iterator<Item = (usize, us
 /// Slopes at the current configuration (they fix `K` for the step).
 pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     for c in 0..model.couplings.len() {
-        let (_, slope, _) = value_at(model, c, &|b| pose_of(state, b));
+        let (_, slope, _) = value_at(model, ws, c, &|b| pose_of(state, b));
         ws.coupling_slope[c] = slope;
     }
 }
@@ -78,7 +90,7 @@ pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut 
                 }
             }
         }
-        let (k, _, _) = value_at(model, c, &|b| pose_in(&ws.next_pose, b));
+        let (k, _, _) = value_at(model, ws, c, &|b| pose_in(&ws.next_pose, b));
         residual[o] = k;
     }
 }
@@ -91,7 +103,7 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, h: f64) {
         if let Some(d) = t.pattern.block(n, n) {
             ws.matrix.values[d] = -model.options.regularization;
         }
-        let (_, slope_next, rows_next) = value_at(model, c, &|b| pose_in(&ws.next_pose, b));
+        let (_, slope_next, rows_next) = value_at(model, ws, c, &|b| pose_in(&ws.next_pose, b));
         let slope_now = ws.coupling_slope[c];
         let coefs_next = [1.0, slope_next];
         for (i_term, (ji, dof, coef_now)) in terms(model, c, slope_now).enumerate() {

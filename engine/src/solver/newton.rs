@@ -120,6 +120,7 @@ pub(crate) fn prepare_smooth_forces(
         let fa = ws.free_adr[ji];
         frame.free_jacobian(joint, &mut ws.free_jac[fa..fa + 12 * nf]);
         frame.coordinates(joint, &mut ws.joint_q[ji][..joint.nq()]);
+        crate::joints::coordinates::wind(model, state, ji, &mut ws.joint_q[ji][..joint.nq()]);
         let mut tau = [0.0; 6];
         let q = &ws.joint_q[ji][..joint.nq()];
         generalized_force(model, ji, &frame, q, forces, &mut tau[..nf]);
@@ -1157,6 +1158,20 @@ fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport 
 
 /// Write the solved next state.
 pub(crate) fn write_state(model: &Model, state: &mut State, ws: &Workspace) {
+    // the winding hinges' turns, from the start's poses (still in `state`) to the next ones
+    for (ji, joint) in model.joints.iter().enumerate() {
+        if let Some(k) = model.topology.winding_adr[ji] {
+            let next = |b: usize| {
+                if b == 0 {
+                    Pose::world()
+                } else {
+                    ws.next_pose[b]
+                }
+            };
+            let (p, c) = (next(joint.parent), next(joint.child));
+            state.winding[k] = crate::joints::coordinates::turns_after(model, state, ji, &p, &c);
+        }
+    }
     for b in 1..model.nbody() {
         let p = ws.next_pose[b];
         state.set_pose(

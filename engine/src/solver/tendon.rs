@@ -25,7 +25,14 @@ fn next(ws: &Workspace, b: usize) -> Pose {
 pub(crate) fn next_length(model: &Model, ws: &Workspace, t: usize) -> f64 {
     model.tendon_limits[t].length(|ji, dof| {
         let j = &model.joints[ji];
-        coordinate(model, ji, dof, &next(ws, j.parent), &next(ws, j.child)).0
+        coordinate(
+            model,
+            ws,
+            (ji, dof),
+            &next(ws, j.parent),
+            &next(ws, j.child),
+        )
+        .0
     })
 }
 
@@ -96,8 +103,8 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64], h: f64) {
             let joint = &model.joints[ji];
             let (_, dq) = coordinate(
                 model,
-                ji,
-                dof,
+                ws,
+                (ji, dof),
                 &next(ws, joint.parent),
                 &next(ws, joint.child),
             );
