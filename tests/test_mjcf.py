@@ -679,3 +679,41 @@ def test_unlimited_hinges_wind_on_as_mujocos(k, ref, v0):
     # the state's qpos goes back in as it came out, turns included
     uk = ukemi.Model.from_xml_string(xml)
     np.testing.assert_allclose(uk.make_state(qpos=traj.qpos[-1]).qpos, traj.qpos[-1], atol=1e-12)
+
+
+TENDON_SPRING = """<mujoco><option timestep="{h}" integrator="implicitfast"/><worldbody>
+  <body name="a" pos="0 0 1"><joint name="j1" type="hinge" axis="0 1 0" ref="10"/>
+    <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.04" contype="0" conaffinity="0"/>
+    <body name="b" pos="0.3 0 0"><joint name="j2" type="hinge" axis="0 1 0"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.04" contype="0" conaffinity="0"/>
+    </body></body></worldbody>
+  <tendon><fixed name="t" stiffness="30" damping="{d}" {springlength}>
+    <joint joint="j1" coef="1"/><joint joint="j2" coef="-0.5"/></fixed></tendon></mujoco>"""
+
+
+@pytest.mark.parametrize("springlength, d", [("", 0.5), ('springlength="0.4"', 2.0)])
+def test_passive_tendons_follow_mujoco(springlength, d):
+    """A fixed tendon's `stiffness`, `damping` and `springlength`: a spring on L = q1 - q2/2
+    (rest length MuJoCo's default, L at the joints' springref, 0 here though j1's ref is 10°;
+    or 0.4) and an implicit damper on its rate, on a double pendulum under gravity. ukemi
+    follows MuJoCo's `implicitfast` on the same MJCF, and the gap shrinks with dt (1 s)."""
+    q0, gaps = [0.5, -0.3], []
+    for h in (1e-3, 5e-4):
+        xml = TENDON_SPRING.format(h=h, d=d, springlength=springlength)
+        mj, traj, mq, _ = rollout_both(xml, q0, [0.0, 0.0], np.zeros((round(1.0 / h), 0)))
+        gaps.append(np.abs(traj.qpos[1:] - mq).max())
+    uk = ukemi.Model.from_xml_string(xml)
+    free = ukemi.Model.from_xml_string(re.sub(r'stiffness="30" damping="[0-9.]+"', "", xml))
+    apart = np.abs(ukemi.rollout(free, free.make_state(qpos=q0), nsteps=2000).qpos[-1]
+                   - traj.qpos[-1]).max()
+    print(f"\n{springlength or 'default springlength'} d {d}: gaps {gaps}, "
+          f"without the tendon {apart:.2f} rad away")
+    assert gaps[0] < 5e-3 and gaps[1] < 0.7 * gaps[0] and apart > 0.1, (gaps, apart)
+    assert dict(uk.variable_counts)["joint_impulse"] == dict(free.variable_counts)["joint_impulse"]
+
+
+def test_tendon_friction_and_dead_bands_are_unsupported():
+    for attr, what in (('frictionloss="1"', "friction"), ('springlength="0.1 0.3"', "dead band")):
+        xml = TENDON_SPRING.format(h=1e-3, d=0.5, springlength=attr)
+        with pytest.raises(ukemi.UnsupportedError, match=what):
+            ukemi.Model.from_xml_string(xml)

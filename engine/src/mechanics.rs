@@ -138,6 +138,19 @@ pub fn spring_energy(model: &Model, state: &State) -> f64 {
             .map(|i| 0.5 * f[i] * f[i] / j.stiffness[i])
             .sum::<f64>();
     }
+    // passive tendon springs ½ k (L - L₀)²
+    if model.passive_tendons.is_empty() {
+        return e;
+    }
+    let q = crate::joints::coordinates::qpos(model, state);
+    for t in &model.passive_tendons {
+        let len: f64 = t
+            .terms
+            .iter()
+            .map(|&(j, d, c)| c * q[model.joints[j].qpos_adr + d])
+            .sum();
+        e += 0.5 * t.stiffness * (len - t.springlength).powi(2);
+    }
     e
 }
 

@@ -611,6 +611,8 @@ pub struct Workspace {
     /// Per actuator: the damping a fixed-tendon servo's velocity gain puts on the tendon's rate
     /// for this step (0 for the others), taken implicitly.
     pub(crate) tendon_damping: Vec<f64>,
+    /// Spring force `-k (L - L₀)` of each passive tendon at the current configuration.
+    pub(crate) tendon_spring: Vec<f64>,
     /// `∂k/∂x` of each joint coupling at the current configuration.
     pub(crate) coupling_slope: Vec<f64>,
     /// Per candidate: the feature held fixed for this step (a near-flat disk's rim point, a box
@@ -857,6 +859,7 @@ impl Workspace {
         self.act_force.fill(0.0);
         self.servo_damping.fill(0.0);
         self.tendon_damping.fill(0.0);
+        self.tendon_spring.fill(0.0);
         self.coupling_slope.fill(0.0);
         // (`nt` is read only while `nt_on`, and every solve clears it first)
         self.nt_on = false;
@@ -1053,6 +1056,7 @@ impl Workspace {
             act_force: vec![0.0; model.nu()],
             servo_damping: vec![0.0; nfree / 12],
             tendon_damping: vec![0.0; model.nu()],
+            tendon_spring: vec![0.0; model.passive_tendons.len()],
             coupling_slope: vec![0.0; model.couplings.len()],
             topology_id: model.topology_id(),
             nt: vec![None; model.ncontact()],

@@ -1211,3 +1211,45 @@ fn dry_joint_friction_jacobians_match_the_step() {
     check_rollout_vjp(&m, &s, 8, None);
     check_rollout_vjp(&m, &s, 8, Some(1e-4));
 }
+
+/// A passive tendon (spring and implicit damper on `L = q₀ - ½ q₂`, non-adjacent joints) on a
+/// chain of three hinges with motors.
+#[test]
+fn passive_tendon_jacobians_match_the_step() {
+    use ukemi_engine::model::PassiveTendonSpec;
+    let mut b = ModelBuilder::new().timestep(0.01);
+    for i in 0..3 {
+        let (name, parent) = (format!("l{i}"), format!("l{}", i.max(1) - 1));
+        let parent = if i == 0 { "world" } else { parent.as_str() };
+        let pa = if i == 0 { [0.0; 3] } else { [0.0, 0.0, -0.5] };
+        b = b
+            .body(BodySpec::new(&name, 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5 - i as f64]))
+            .joint(
+                JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
+                    .axis([0.0, 1.0, 0.0])
+                    .anchors(pa, [0.0, 0.0, 0.5]),
+            )
+            .actuator(ActuatorSpec::motor(
+                &format!("m{i}"),
+                &format!("j{i}"),
+                0,
+                1.0,
+            ));
+    }
+    b.add_passive_tendon(PassiveTendonSpec {
+        name: "t".into(),
+        terms: vec![("j0".into(), 0, 1.0), ("j2".into(), 0, -0.5)],
+        stiffness: 8.0,
+        springlength: Some(0.2),
+        damping: 3.0,
+    });
+    let m = tight(b.compile().unwrap());
+    let s = moving_state(&m, &[0.3, -0.2, 0.9], &[2.0, 0.5, -1.5]);
+    let ctrl = [0.5, 0.2, -0.3];
+    let e = check(&m, &s, &ctrl, Coordinates::Minimal, None, 1e-6);
+    eprintln!("passive tendon: max rel err {e:e}");
+    check(&m, &s, &ctrl, Coordinates::Maximal, None, 1e-6);
+    coloured_vs_reference(&m, &s, &ctrl, Coordinates::Minimal, None);
+    coloured_vs_reference(&m, &s, &ctrl, Coordinates::Maximal, None);
+    check_rollout_vjp(&m, &s, 6, None);
+}

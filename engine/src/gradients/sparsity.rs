@@ -3,7 +3,7 @@
 //!
 //! A perturbed input changes the residual only near the bodies it touches: their body rows and
 //! those of their neighbours in the *interaction graph* (bodies sharing a joint, a joint
-//! coupling or an actuator transmission), the joint, limit and coupling nodes of their joints,
+//! coupling, an actuator transmission or a passive tendon), the joint, limit and coupling nodes of their joints,
 //! the tendon-limit nodes over their joints, and the nodes of the contact candidates whose
 //! geometry it moves together with the rows of those candidates' two bodies. (A tendon limit
 //! links no bodies: its impulse acts on each term's bodies through that joint's own free
@@ -32,6 +32,10 @@ pub(super) fn neighbours(model: &Model) -> Vec<Vec<usize>> {
     }
     for a in &model.actuators {
         link(&transmission_bodies(model, &a.transmission));
+    }
+    for t in &model.passive_tendons {
+        let terms = Transmission::Tendon(t.terms.clone());
+        link(&transmission_bodies(model, &terms));
     }
     for n in &mut nbrs {
         n.sort_unstable();

@@ -27,3 +27,20 @@ impl TendonLimit {
         self.terms.iter().map(|&(j, d, c)| c * q(j, d)).sum()
     }
 }
+
+/// A compiled passive fixed tendon (MuJoCo's `<tendon><fixed>` with `stiffness` or `damping`):
+/// a spring `-k (L - L₀)` at the current configuration and an implicit damper `-d L̇⁺` on the
+/// length `L = Σ coef q`, each acting on every term's coordinate as `coef ·` the tendon force.
+#[derive(Clone, Debug)]
+pub struct PassiveTendon {
+    /// Unique name.
+    pub name: String,
+    /// Terms `(joint, free dof, coef)`: hinge or slide coordinates of tree joints.
+    pub terms: Vec<(usize, usize, f64)>,
+    /// Spring stiffness (N/m or N·m/rad per unit length).
+    pub stiffness: f64,
+    /// Spring rest length `L₀` (m or rad).
+    pub springlength: f64,
+    /// Damping (N·s/m or N·m·s/rad per unit length), acting on the next velocities.
+    pub damping: f64,
+}

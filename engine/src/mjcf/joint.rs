@@ -235,9 +235,9 @@ pub(super) fn group_joints(
     }
     if n_free + nball == 0 {
         spec.qpos_ref = per_dof.iter().map(|j| j.qpos_ref).collect();
-        if joints.iter().any(|j| j.stiffness != 0.0) {
-            spec.spring_ref = Some(per_dof.iter().map(|j| j.springref).collect());
-        }
+        // MuJoCo's qpos_spring, whether or not the joint has a spring: a passive tendon's
+        // default rest length is measured there
+        spec.spring_ref = Some(per_dof.iter().map(|j| j.springref).collect());
     } else if joints.iter().any(|j| j.stiffness != 0.0) {
         if n_free > 0 {
             return Err(unsupported(format!(

@@ -8,8 +8,9 @@
 //! own anchor), geoms with contact bit masks and `condim` 1 or 3, `contact/exclude` and
 //! `contact/pair` (friction and condim from the pair or its class, as MuJoCo), `equality`
 //! connect/weld (loop joints) and joint (a polynomial coupling solved with the joints), fixed
-//! tendons as actuator transmissions and, when limited, as hard tendon limits (inequalities
-//! solved with the contacts), `actuator` motor/position/velocity/general on joints, fixed
+//! tendons as actuator transmissions, when limited as hard tendon limits (inequalities solved
+//! with the contacts) and with `stiffness`/`damping`/`springlength` as passive springs and
+//! implicit dampers, `actuator` motor/position/velocity/general on joints, fixed
 //! tendons and sites (with `forcerange`, and a position servo's `dampratio` turned into its
 //! velocity gain at qpos0 and its `inheritrange` into its control range, as MuJoCo does), joint
 //! `frictionloss` (hard dry friction, `solver::friction`), and `keyframe`.

@@ -4,15 +4,16 @@ use roxmltree::Node;
 
 use super::body::Tree;
 use super::parse::{Ctx, elements};
-use crate::model::TendonLimitSpec;
+use crate::model::{PassiveTendonSpec, TendonLimitSpec};
 use crate::{ModelBuilder, Result};
 
 /// Fixed tendons by name: `(engine joint, free dof, coef)` per MJCF joint term.
 pub(super) type Tendons = std::collections::HashMap<String, Vec<(String, usize, f64)>>;
 
-/// Fixed tendons (for actuators) and their limits (added to `b`). Stiffness, damping and
-/// friction are unsupported; spatial tendons are ignored with a warning (a limited one is
-/// reported as not enforced).
+/// Fixed tendons (for actuators), their limits and their springs and dampers (added to `b`).
+/// Tendon friction and spring dead bands are unsupported; spatial tendons are ignored with a
+/// warning (a limited one is reported as not enforced; one with stiffness or damping is an
+/// error).
 pub(super) fn read_tendons<'a, 'i>(
     ctx: &mut Ctx<'a, 'i>,
     root: Node<'a, 'i>,
@@ -24,14 +25,18 @@ pub(super) fn read_tendons<'a, 'i>(
     for (i, t) in all.flat_map(elements).enumerate() {
         let class = ctx.class_of(t, "main")?;
         let name = t.attribute("name").unwrap_or("").to_string();
-        let active = ["stiffness", "damping", "frictionloss"].iter().any(|a| {
+        let set = |a: &str| {
             ctx.raw(t, &class, a)
                 .is_some_and(|v| v.trim().parse::<f64>() != Ok(0.0))
-        });
-        if active {
+        };
+        if set("frictionloss") {
+            return Err(ctx.unsupported(t, "tendons with friction are not supported"));
+        }
+        let passive = set("stiffness") || set("damping");
+        if passive && t.tag_name().name() != "fixed" {
             return Err(ctx.unsupported(
                 t,
-                "tendons with stiffness, damping or friction are not supported",
+                "spatial tendons with stiffness or damping are not supported",
             ));
         }
         let limited = ctx.tristate(t, &class, "limited")?;
@@ -88,6 +93,37 @@ pub(super) fn read_tendons<'a, 'i>(
                 },
                 terms: terms.clone(),
                 range,
+            });
+        }
+        if passive {
+            let stiffness = ctx.num(t, &class, "stiffness", 0.0)?;
+            let damping = ctx.num(t, &class, "damping", 0.0)?;
+            if stiffness < 0.0 || damping < 0.0 {
+                return Err(ctx.err(
+                    t,
+                    format!("stiffness {stiffness} and damping {damping} must be >= 0"),
+                ));
+            }
+            // MuJoCo's springlength: -1 (the default) is the length at qpos0; two different
+            // values are a dead band
+            let sl = ctx.nums_padded(t, &class, "springlength", &[-1.0, -1.0])?;
+            let springlength = match (sl[0], sl[1]) {
+                (a, b) if a == -1.0 && b == -1.0 => None,
+                (a, b) if b == -1.0 || a == b => Some(a),
+                _ => {
+                    return Err(ctx.unsupported(t, format!("tendon springlength dead band {sl:?}")));
+                }
+            };
+            b.add_passive_tendon(PassiveTendonSpec {
+                name: if name.is_empty() {
+                    format!("tendon{i}")
+                } else {
+                    name.clone()
+                },
+                terms: terms.clone(),
+                stiffness,
+                springlength,
+                damping,
             });
         }
         out.insert(name, terms);

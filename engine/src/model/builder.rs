@@ -2,8 +2,8 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::transmission::{
-    CouplingSpec, TendonLimitSpec, TransmissionSpec, compile_couplings, compile_tendon_limits,
-    compile_transmission,
+    CouplingSpec, PassiveTendonSpec, TendonLimitSpec, TransmissionSpec, compile_couplings,
+    compile_passive_tendons, compile_tendon_limits, compile_transmission,
 };
 use super::{Actuator, Body, Model, Options, Topology};
 use crate::contact::geometry::{self, Shape};
@@ -310,6 +310,7 @@ pub struct ModelBuilder {
     condim_max: bool,
     couplings: Vec<CouplingSpec>,
     tendon_limits: Vec<TendonLimitSpec>,
+    passive_tendons: Vec<PassiveTendonSpec>,
 }
 
 impl ModelBuilder {
@@ -386,6 +387,10 @@ impl ModelBuilder {
         self.geom_excludes
             .push((geom_a.to_string(), geom_b.to_string()));
     }
+    /// Add a passive fixed tendon (a spring and a damper on a tendon length).
+    pub fn add_passive_tendon(&mut self, t: PassiveTendonSpec) {
+        self.passive_tendons.push(t);
+    }
     /// Whether a geom of this name has been added.
     pub fn has_geom(&self, name: &str) -> bool {
         self.geoms.iter().any(|g| g.name == name)
@@ -423,7 +428,14 @@ impl ModelBuilder {
         let contacts = self.compile_pairs(&geoms, &joints, &names)?;
         let couplings = compile_couplings(&self.couplings, &joints)?;
         let tendon_limits = compile_tendon_limits(&self.tendon_limits, &joints)?;
+        let passive_tendons = compile_passive_tendons(&self.passive_tendons, &joints)?;
+        // implicit tendon dampers (servos' velocity gains, passive dampers) couple their bodies
         let actuators = self.compile_actuators(&joints, &bodies)?;
+        let mut damped_tendons = crate::solver::actuation::servo_tendons(&actuators);
+        damped_tendons.extend(
+            (passive_tendons.iter().filter(|t| t.damping > 0.0))
+                .map(|t| t.terms.iter().map(|&(j, _, _)| j).collect()),
+        );
         let topology = Topology::new(
             bodies.len(),
             &joints,
@@ -432,7 +444,7 @@ impl ModelBuilder {
             &contacts,
             &couplings,
             &tendon_limits,
-            &crate::solver::actuation::servo_tendons(&actuators),
+            &damped_tendons,
         )
         .map_err(|e| Error::model("joints", "graph", e))?;
         let nq = joints.iter().filter(|j| !j.is_loop).map(Joint::nq).sum();
@@ -444,6 +456,7 @@ impl ModelBuilder {
             actuators,
             couplings,
             tendon_limits,
+            passive_tendons,
             geoms,
             contacts,
             nq,

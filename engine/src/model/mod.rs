@@ -10,7 +10,9 @@ pub use builder::{ActuatorSpec, BodySpec, GeomSpec, JointSpec, ModelBuilder, Pai
 pub use options::Options;
 pub(crate) use topology::Topology;
 pub(crate) use topology::body_node as topology_body_node;
-pub use transmission::{CouplingSpec, TendonLimitSpec, Transmission, TransmissionSpec};
+pub use transmission::{
+    CouplingSpec, PassiveTendonSpec, TendonLimitSpec, Transmission, TransmissionSpec,
+};
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -94,6 +96,8 @@ pub struct Model {
     pub couplings: Vec<Coupling>,
     /// Fixed-tendon limits, solved as inequality constraints with the contacts.
     pub tendon_limits: Vec<TendonLimit>,
+    /// Passive fixed tendons (springs and dampers on tendon lengths).
+    pub passive_tendons: Vec<crate::joints::tendon::PassiveTendon>,
     /// Collision geometries.
     pub geoms: Vec<Geom>,
     /// Contact candidates, decided at compile time.

@@ -105,6 +105,23 @@ pub struct TendonLimitSpec {
     pub range: (f64, f64),
 }
 
+/// A passive fixed tendon to add (MuJoCo's `<tendon><fixed stiffness damping springlength>`):
+/// a spring and a damper on `L = Σ coef q`.
+#[derive(Clone, Debug)]
+pub struct PassiveTendonSpec {
+    /// Unique name.
+    pub name: String,
+    /// Terms `(joint name, free dof, coef)` over hinge or slide coordinates.
+    pub terms: Vec<(String, usize, f64)>,
+    /// Spring stiffness (≥ 0).
+    pub stiffness: f64,
+    /// Spring rest length; `None`: the length at the joints' spring rest positions (MuJoCo's
+    /// `springlength = -1`: `qpos_spring`, the joints' `springref`).
+    pub springlength: Option<f64>,
+    /// Damping (≥ 0), implicit.
+    pub damping: f64,
+}
+
 /// Index of a named joint's scalar (hinge or slide) free dof.
 fn scalar_dof(joints: &[Joint], name: &str, dof: usize, field: &str) -> Result<(usize, usize)> {
     let j = joints
@@ -281,6 +298,70 @@ pub(super) fn compile_tendon_limits(
             name: spec.name.clone(),
             terms,
             range: spec.range,
+        });
+    }
+    Ok(out)
+}
+
+pub(super) fn compile_passive_tendons(
+    specs: &[PassiveTendonSpec],
+    joints: &[Joint],
+) -> Result<Vec<crate::joints::tendon::PassiveTendon>> {
+    let mut out: Vec<crate::joints::tendon::PassiveTendon> = Vec::with_capacity(specs.len());
+    for spec in specs {
+        let f = |field: &str| format!("passive_tendon[{}].{field}", spec.name);
+        ensure!(
+            !out.iter().any(|t| t.name == spec.name),
+            Error::model(f("name"), &spec.name, "duplicate passive tendon name")
+        );
+        for (what, v) in [("stiffness", spec.stiffness), ("damping", spec.damping)] {
+            ensure!(
+                v.is_finite() && v >= 0.0,
+                Error::model(f(what), v, "must be finite and >= 0")
+            );
+        }
+        if let Some(l) = spec.springlength {
+            ensure!(
+                l.is_finite(),
+                Error::model(f("springlength"), l, "must be finite")
+            );
+        }
+        ensure!(
+            spec.terms.iter().any(|t| t.2 != 0.0),
+            Error::model(
+                f("terms"),
+                &spec.terms,
+                "need at least one joint with a non-zero coef"
+            )
+        );
+        let mut terms = Vec::with_capacity(spec.terms.len());
+        for (name, dof, coef) in &spec.terms {
+            ensure!(
+                coef.is_finite(),
+                Error::model(f("terms.coef"), coef, "must be finite")
+            );
+            let (j, d) = scalar_dof(joints, name, *dof, &f("terms.joint"))?;
+            terms.push((j, d, *coef));
+        }
+        // MuJoCo's springlength -1: the length at the joints' spring rest positions
+        // (`springref`; the reference configuration where a joint has none)
+        let at_rest: f64 = terms
+            .iter()
+            .map(|&(j, d, c)| {
+                let joint = &joints[j];
+                c * joint
+                    .spring_ref
+                    .get(d)
+                    .copied()
+                    .unwrap_or(joint.qpos_ref_at(d))
+            })
+            .sum();
+        out.push(crate::joints::tendon::PassiveTendon {
+            name: spec.name.clone(),
+            terms,
+            stiffness: spec.stiffness,
+            springlength: spec.springlength.unwrap_or(at_rest),
+            damping: spec.damping,
         });
     }
     Ok(out)

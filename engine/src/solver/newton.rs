@@ -126,6 +126,17 @@ pub(crate) fn prepare_smooth_forces(
         generalized_force(model, ji, &frame, q, forces, &mut tau[..nf]);
         ws.joint_tau[ji] = tau;
     }
+    // passive tendon springs `-k (L - L₀)` (current configuration), applied below with the
+    // actuators to every joint whose bodies' rows are written (a restricted evaluation moves
+    // one term's coordinate and must see the force on the others)
+    for (t, tendon) in model.passive_tendons.iter().enumerate() {
+        let len: f64 = tendon
+            .terms
+            .iter()
+            .map(|&(j, d, c)| c * ws.joint_q[j][d])
+            .sum();
+        ws.tendon_spring[t] = -tendon.stiffness * (len - tendon.springlength);
+    }
     super::actuation::actuator_forces(model, state, ws, ctrl);
     let row = |ws: &Workspace, b: usize| b > 0 && (ws.body_filter.is_empty() || ws.body_filter[b]);
     for (ji, joint) in model.joints.iter().enumerate() {
@@ -135,6 +146,11 @@ pub(crate) fn prepare_smooth_forces(
         let nf = joint.nfree();
         let mut tau = ws.joint_tau[ji];
         super::actuation::add_joint_forces(model, ws, ji, &mut tau[..nf]);
+        for (t, tendon) in model.passive_tendons.iter().enumerate() {
+            for &(_, d, c) in tendon.terms.iter().filter(|term| term.0 == ji) {
+                tau[d] += c * ws.tendon_spring[t];
+            }
+        }
         if tau[..nf].iter().any(|&t| t != 0.0) {
             let fa = ws.free_adr[ji];
             let jf = &ws.free_jac[fa..fa + 12 * nf];
@@ -562,9 +578,23 @@ fn tendon_servo<'m>(model: &'m Model, damping: &[f64], a: usize) -> Option<(&'m 
     }
 }
 
-/// `r_b += h d coef_t J_tbᵀ L̇⁺` for each term `t` of each fixed-tendon servo with implicit
-/// damping `d`, `L̇⁺ = Σ coef J_f w⁺` the tendon's rate at the iterate (the joint damper's form,
-/// [`add_damper_residual`], on the tendon's rate).
+/// Every implicit tendon damper `(terms, d)`: the fixed-tendon servos' velocity gains
+/// (`damping`, per actuator) and the passive tendons' dampers.
+fn tendon_dampers<'m>(
+    model: &'m Model,
+    damping: &'m [f64],
+) -> impl Iterator<Item = (&'m TendonTerms, f64)> + 'm {
+    (0..model.actuators.len())
+        .filter_map(move |a| tendon_servo(model, damping, a))
+        .chain(
+            (model.passive_tendons.iter().filter(|t| t.damping > 0.0))
+                .map(|t| (t.terms.as_slice(), t.damping)),
+        )
+}
+
+/// `r_b += h d coef_t J_tbᵀ L̇⁺` for each term `t` of each implicit tendon damper `d`
+/// ([`tendon_dampers`]), `L̇⁺ = Σ coef J_f w⁺` the tendon's rate at the iterate (the joint
+/// damper's form, [`add_damper_residual`], on the tendon's rate).
 fn add_tendon_servo_residual(
     model: &Model,
     free_jac: &[f64],
@@ -574,10 +604,7 @@ fn add_tendon_servo_residual(
     residual: &mut [f64],
     h: f64,
 ) {
-    for a in 0..model.actuators.len() {
-        let Some((terms, d)) = tendon_servo(model, damping, a) else {
-            continue;
-        };
+    for (terms, d) in tendon_dampers(model, damping) {
         let row =
             |j: usize, dof: usize| &free_jac[free_adr[j] + 12 * dof..free_adr[j] + 12 * dof + 12];
         let mut rate = 0.0;
@@ -616,14 +643,12 @@ fn add_tendon_servo_residual(
 }
 
 /// `h d coef_t coef_u J_taᵀ J_ub` into the body blocks (a, b) of every pair of terms `t, u` of
-/// each fixed-tendon servo with implicit damping `d` (the topology gives every pair of its
-/// bodies a block: `actuation::servo_tendons`).
+/// each implicit tendon damper `d` ([`tendon_dampers`]; the topology gives every pair of its
+/// bodies a block: `ModelBuilder::compile`'s damped tendons).
 fn add_tendon_servo_blocks(model: &Model, ws: &mut Workspace, h: f64) {
     let t = &model.topology;
-    for a in 0..model.actuators.len() {
-        let Some((terms, d)) = tendon_servo(model, &ws.tendon_damping, a) else {
-            continue;
-        };
+    let damping = std::mem::take(&mut ws.tendon_damping);
+    for (terms, d) in tendon_dampers(model, &damping) {
         for &(ja, da, ca) in terms {
             for &(jb, db, cb) in terms {
                 let (joint_a, joint_b) = (&model.joints[ja], &model.joints[jb]);
@@ -655,6 +680,7 @@ fn add_tendon_servo_blocks(model: &Model, ws: &mut Workspace, h: f64) {
             }
         }
     }
+    ws.tendon_damping = damping;
 }
 
 /// 2-norm of `x` over the live rows ([`for_each_live_range`]): the rows of inactive candidates
