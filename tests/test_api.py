@@ -462,3 +462,46 @@ def test_builder_frictionloss_is_mujocos_dry_joint_friction():
     assert dict(built(0.0).variable_counts)["joint_friction"] == 0
     with pytest.raises(ValueError, match="frictionloss"):
         built(-1.0)
+
+
+def test_builder_pairs_and_passive_tendons_are_the_mjcf_ones():
+    """`ModelBuilder.add_pair` and `add_passive_tendon` build what MJCF `<contact><pair>` and a
+    fixed tendon with stiffness and damping load: the same trajectories, bit for bit. Bad
+    values name the field."""
+    def built(pair_friction=0.3, k=30.0, d=0.5, contact="nonlinear"):
+        b = ukemi.ModelBuilder(timestep=0.01)
+        b.add_geom("floor", "world", "plane", friction=1.0, contype=0, conaffinity=0)
+        b.add_body("a", mass=1.0, inertia=(0.01, 0.01, 0.01), pos=(0, 0, 0.2))
+        b.add_joint("j1", "slide", "world", "a", axis=(0, 0, 1), parent_anchor=(0, 0, 0.2))
+        b.add_body("b", mass=1.0, inertia=(0.01, 0.01, 0.01), pos=(0, 0, 0.2))
+        b.add_joint("j2", "hinge", "a", "b", axis=(0, 1, 0))
+        b.add_geom("ball", "b", "sphere", size=(0.1,), pos=(0.2, 0, 0), friction=1.0)
+        b.add_pair("floor", "ball", friction=pair_friction, contact=contact)
+        b.add_passive_tendon("t", [("j1", 1.0), ("j2", -0.5)], stiffness=k, damping=d,
+                             springlength=0.1)
+        return b.compile()
+
+    xml = """<mujoco><option timestep="0.01"/><worldbody>
+      <geom name="floor" type="plane" size="5 5 .1" friction="1" contype="0" conaffinity="0"/>
+      <body name="a" pos="0 0 0.2"><joint name="j1" type="slide" axis="0 0 1"/>
+        <inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+        <body name="b"><joint name="j2" type="hinge" axis="0 1 0"/>
+          <inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+          <geom name="ball" type="sphere" size="0.1" pos="0.2 0 0" mass="0" friction="1"/>
+        </body></body></worldbody>
+      <contact><pair geom1="floor" geom2="ball" friction="0.3 0.3"/></contact>
+      <tendon><fixed name="t" stiffness="30" damping="0.5" springlength="0.1">
+        <joint joint="j1" coef="1"/><joint joint="j2" coef="-0.5"/></fixed></tendon></mujoco>"""
+    ours, theirs = built(), ukemi.Model.from_xml_string(xml)
+    a = ukemi.rollout(ours, ours.make_state(qvel=[0.0, 3.0]), nsteps=100)
+    b = ukemi.rollout(theirs, theirs.make_state(qvel=[0.0, 3.0]), nsteps=100)
+    assert a.converged and b.converged
+    np.testing.assert_allclose(a.qpos, b.qpos, atol=1e-12)  # (MJCF inertias: round-off)
+    # the floor's bitmasks collide with nothing: only the pair holds the ball up
+    assert ours.ncontact > 0 and a.qpos[:, 0].min() > -0.3, a.qpos[:, 0].min()
+    with pytest.raises(ValueError, match=r"pair\[0\].friction"):
+        built(pair_friction=-1.0)
+    with pytest.raises(ValueError, match="contact"):
+        built(contact="sticky")
+    with pytest.raises(ValueError, match=r"passive_tendon\[t\].stiffness"):
+        built(k=-1.0)

@@ -197,6 +197,46 @@ impl PyModelBuilder {
             .add_tendon_limit(ukemi_engine::model::TendonLimitSpec { name, terms, range });
     }
 
+    #[pyo3(signature = (name, terms, stiffness, damping, springlength=None))]
+    fn add_passive_tendon(
+        &mut self,
+        name: String,
+        terms: Vec<(String, usize, f64)>,
+        stiffness: f64,
+        damping: f64,
+        springlength: Option<f64>,
+    ) {
+        self.inner
+            .add_passive_tendon(ukemi_engine::model::PassiveTendonSpec {
+                name,
+                terms,
+                stiffness,
+                springlength,
+                damping,
+            });
+    }
+
+    fn add_pair(
+        &mut self,
+        geom_a: String,
+        geom_b: String,
+        friction: f64,
+        contact: &str,
+    ) -> PyResult<()> {
+        let model = ContactModel::from_name(contact).ok_or_else(|| {
+            ModelError::new_err(format!(
+                "invalid model: `pair[{geom_a}, {geom_b}].contact` = {contact:?}: expected \"nonlinear\", \"linear\" or \"impact\""
+            ))
+        })?;
+        self.inner.add_pair(ukemi_engine::PairSpec {
+            geom_a,
+            geom_b,
+            friction,
+            model,
+        });
+        Ok(())
+    }
+
     fn add_exclude(&mut self, body_a: &str, body_b: &str) {
         self.inner.add_exclude(body_a, body_b);
     }

@@ -201,20 +201,47 @@ class ModelBuilder:
                 ball quaternion) and its coefficient. At least one coef must be non-zero.
             range: ``(lo, hi)`` of the length ``Σ coef·q`` (m or rad), ``lo < hi``.
         """
-        if isinstance(terms, (str, bytes)) or not hasattr(terms, "__iter__"):
-            raise TypeError(f"tendon_limit[{name}].terms must be a list of (joint, coef[, dof]), got {terms!r}")
-        parsed = []
-        for i, term in enumerate(terms):
-            if isinstance(term, (str, bytes)) or not hasattr(term, "__len__") or len(term) not in (2, 3):
-                raise TypeError(f"tendon_limit[{name}].terms[{i}] must be (joint, coef) or (joint, coef, dof), "
-                                f"got {term!r}")
-            joint, coef, *rest = term
-            dof = rest[0] if rest else 0
-            if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or dof < 0:
-                raise TypeError(f"tendon_limit[{name}].terms[{i}] dof must be a non-negative integer, got {dof!r}")
-            parsed.append((str(joint), int(dof), as_scalar(f"tendon_limit[{name}].terms[{i}].coef", coef)))
+        parsed = _tendon_terms(f"tendon_limit[{name}]", terms)
         lo, hi = as_vector(f"tendon_limit[{name}].range", range, 2)
         self._b.add_tendon_limit(str(name), parsed, (lo, hi))
+
+    def add_passive_tendon(self, name: str, terms, stiffness: float = 0.0, damping: float = 0.0,
+                           springlength=None) -> None:
+        """A spring and a damper on a fixed tendon's length ``L = Σ coef·q`` (MuJoCo's
+        ``<tendon><fixed stiffness damping springlength>``): the tendon force
+        ``-stiffness (L - springlength) - damping L̇`` acts on each term's coordinate as
+        ``coef ·`` the force; the spring at the current configuration, the damper at the next
+        velocities (implicit, like a joint damper).
+
+        Args:
+            name: Unique name.
+            terms: ``[(joint, coef), ...]`` or ``[(joint, coef, dof), ...]`` over hinge or slide
+                coordinates (as in :meth:`add_tendon_limit`).
+            stiffness, damping: >= 0.
+            springlength: Rest length (m or rad); None: the length at the joints' spring rest
+                positions (MuJoCo's default).
+        """
+        parsed = _tendon_terms(f"passive_tendon[{name}]", terms)
+        rest = None if springlength is None else as_scalar(f"passive_tendon[{name}].springlength",
+                                                           springlength)
+        self._b.add_passive_tendon(str(name), parsed, as_scalar("stiffness", stiffness),
+                                   as_scalar("damping", damping), rest)
+
+    def add_pair(self, geom_a: str, geom_b: str, friction: float = 1.0,
+                 contact: str = "nonlinear") -> None:
+        """Collide two geoms explicitly (MuJoCo's ``<contact><pair>``): whatever their bitmasks,
+        bodies and exclusions say, with this friction and contact model in place of the pair
+        those rules would make.
+
+        Args:
+            geom_a, geom_b: Geom names (on different bodies).
+            friction: Coulomb coefficient (>= 0).
+            contact: ``"nonlinear"`` (exact cone), ``"linear"`` (4-sided pyramid) or
+                ``"impact"`` (frictionless).
+        """
+        if not isinstance(contact, str):
+            raise TypeError(f"`contact` must be a string, got {type(contact).__name__}")
+        self._b.add_pair(str(geom_a), str(geom_b), as_scalar("friction", friction), contact)
 
     def add_exclude(self, body_a: str, body_b: str) -> None:
         """Never collide the geoms of these two bodies (MuJoCo's ``contact/exclude``)."""
@@ -231,3 +258,19 @@ class ModelBuilder:
             UnsupportedError: a feature that is not available.
         """
         return self._b.compile()
+
+
+def _tendon_terms(field: str, terms) -> list:
+    """``[(joint, dof, coef), ...]`` of ``[(joint, coef[, dof]), ...]``, validated."""
+    if isinstance(terms, (str, bytes)) or not hasattr(terms, "__iter__"):
+        raise TypeError(f"{field}.terms must be a list of (joint, coef[, dof]), got {terms!r}")
+    parsed = []
+    for i, term in enumerate(terms):
+        if isinstance(term, (str, bytes)) or not hasattr(term, "__len__") or len(term) not in (2, 3):
+            raise TypeError(f"{field}.terms[{i}] must be (joint, coef) or (joint, coef, dof), got {term!r}")
+        joint, coef, *rest = term
+        dof = rest[0] if rest else 0
+        if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or dof < 0:
+            raise TypeError(f"{field}.terms[{i}] dof must be a non-negative integer, got {dof!r}")
+        parsed.append((str(joint), int(dof), as_scalar(f"{field}.terms[{i}].coef", coef)))
+    return parsed
