@@ -712,8 +712,29 @@ def test_passive_tendons_follow_mujoco(springlength, d):
     assert dict(uk.variable_counts)["joint_impulse"] == dict(free.variable_counts)["joint_impulse"]
 
 
-def test_tendon_friction_and_dead_bands_are_unsupported():
-    for attr, what in (('frictionloss="1"', "friction"), ('springlength="0.1 0.3"', "dead band")):
-        xml = TENDON_SPRING.format(h=1e-3, d=0.5, springlength=attr)
-        with pytest.raises(ukemi.UnsupportedError, match=what):
-            ukemi.Model.from_xml_string(xml)
+def test_tendon_spring_dead_bands_are_unsupported():
+    xml = TENDON_SPRING.format(h=1e-3, d=0.5, springlength='springlength="0.1 0.3"')
+    with pytest.raises(ukemi.UnsupportedError, match="dead band"):
+        ukemi.Model.from_xml_string(xml)
+
+
+def test_tendon_frictionloss_follows_mujoco():
+    """A fixed tendon's `frictionloss` (dry friction on L = q1 - q2/2, 0.4 N·m) on the double
+    pendulum: sliding, ukemi follows MuJoCo on the same MJCF and the gap shrinks with dt;
+    without it the pendulum ends elsewhere. The impulse is reported."""
+    q0, gaps = [0.5, -0.3], []
+    for h in (1e-3, 5e-4):
+        xml = TENDON_SPRING.format(h=h, d=0.0, springlength='frictionloss="0.4"').replace(
+            'stiffness="30" ', "")
+        mj, traj, mq, _ = rollout_both(xml, q0, [0.0, 0.0], np.zeros((round(0.5 / h), 0)))
+        gaps.append(np.abs(traj.qpos[1:] - mq).max())
+    uk = ukemi.Model.from_xml_string(xml)
+    free = ukemi.Model.from_xml_string(xml.replace('frictionloss="0.4"', ""))
+    apart = np.abs(ukemi.rollout(free, free.make_state(qpos=q0), nsteps=1000).qpos[-1]
+                   - traj.qpos[-1]).max()
+    print(f"\ntendon frictionloss: gaps {gaps}, without it {apart:.3f} rad away")
+    assert gaps[0] < 5e-3 and gaps[1] < 0.7 * gaps[0] and apart > 0.01, (gaps, apart)
+    assert dict(uk.variable_counts)["tendon_friction"] == 4
+    state, _ = ukemi.step(uk, uk.make_state(qpos=q0, qvel=[2.0, 0.0]))
+    # (within the interior point's room `kappa_tol / (dt L̇)` of its bound)
+    np.testing.assert_allclose(state.tendon_friction_impulse, [0.4 * 5e-4], rtol=1e-4)

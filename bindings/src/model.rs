@@ -197,7 +197,7 @@ impl PyModelBuilder {
             .add_tendon_limit(ukemi_engine::model::TendonLimitSpec { name, terms, range });
     }
 
-    #[pyo3(signature = (name, terms, stiffness, damping, springlength=None))]
+    #[pyo3(signature = (name, terms, stiffness, damping, springlength=None, frictionloss=0.0))]
     fn add_passive_tendon(
         &mut self,
         name: String,
@@ -205,6 +205,7 @@ impl PyModelBuilder {
         stiffness: f64,
         damping: f64,
         springlength: Option<f64>,
+        frictionloss: f64,
     ) {
         self.inner
             .add_passive_tendon(ukemi_engine::model::PassiveTendonSpec {
@@ -213,6 +214,7 @@ impl PyModelBuilder {
                 stiffness,
                 springlength,
                 damping,
+                frictionloss,
             });
     }
 

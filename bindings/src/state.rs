@@ -90,6 +90,12 @@ impl PyState {
     fn joint_friction_impulse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_vec(py, self.inner.joint_friction_impulse(&self.model))
     }
+    /// Dry-friction impulse of each passive tendon with `frictionloss` in the last step (per
+    /// unit length; positive resists a lengthening tendon), (n tendons with friction,).
+    #[getter]
+    fn tendon_friction_impulse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.tendon_friction_impulse(&self.model))
+    }
     /// Discrete linear momentum (kg·m/s), (3,).
     fn linear_momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_slice(

@@ -352,13 +352,16 @@ fn neutral_ineq_vars(model: &Model) -> Vec<f64> {
     }
     v.extend(std::iter::repeat_n(1.0, 4 * model.nlimit()));
     v.extend(std::iter::repeat_n(1.0, 4 * model.tendon_limits.len()));
-    // dry friction: at rest (equal displacements both ways, 1 rad/s or m/s), τ = 0
-    // (`solver::friction`)
+    // dry friction, joints' then tendons': at rest (equal displacements both ways, 1 rad/s or
+    // m/s), τ = 0 (`solver::friction`)
     let h = model.options.timestep;
-    for joint in &model.joints {
-        for (_, f) in joint.friction_dofs() {
-            v.extend([h, f * h, h, f * h]);
-        }
+    let joints = model
+        .joints
+        .iter()
+        .flat_map(|j| j.friction_dofs().map(|(_, f)| f));
+    let tendons = model.passive_tendons.iter().map(|t| t.frictionloss);
+    for f in joints.chain(tendons.filter(|&f| f > 0.0)) {
+        v.extend([h, f * h, h, f * h]);
     }
     v
 }
@@ -425,7 +428,7 @@ impl State {
     /// for hinge terms, per unit of coef): positive pushes the length up off its lower limit.
     /// Shape (n tendon limits,).
     pub fn tendon_impulse(&self, model: &Model) -> Vec<f64> {
-        let end = self.ineq_vars.len() - 4 * model.nfriction();
+        let end = self.ineq_vars.len() - 4 * (model.nfriction() + model.ntendon_friction());
         let start = end - 4 * model.tendon_limits.len();
         self.ineq_vars[start..end]
             .chunks_exact(4)
@@ -437,7 +440,16 @@ impl State {
     /// order, their dofs in order; N·s or N·m·s), positive resisting a positive rate: `±f h`
     /// while the dof slides, less while it sticks. Shape (n friction dofs,).
     pub fn joint_friction_impulse(&self, model: &Model) -> Vec<f64> {
-        let start = self.ineq_vars.len() - 4 * model.nfriction();
+        let end = self.ineq_vars.len() - 4 * model.ntendon_friction();
+        let start = end - 4 * model.nfriction();
+        crate::solver::friction::impulses(&self.ineq_vars[start..end]).collect()
+    }
+
+    /// Dry-friction impulse of each passive tendon with `frictionloss` in the last step (N·s or
+    /// N·m·s per unit length), positive resisting a lengthening tendon. Shape (n tendons with
+    /// friction,).
+    pub fn tendon_friction_impulse(&self, model: &Model) -> Vec<f64> {
+        let start = self.ineq_vars.len() - 4 * model.ntendon_friction();
         crate::solver::friction::impulses(&self.ineq_vars[start..]).collect()
     }
 }

@@ -1242,6 +1242,7 @@ fn passive_tendon_jacobians_match_the_step() {
         stiffness: 8.0,
         springlength: Some(0.2),
         damping: 3.0,
+        frictionloss: 0.0,
     });
     let m = tight(b.compile().unwrap());
     let s = moving_state(&m, &[0.3, -0.2, 0.9], &[2.0, 0.5, -1.5]);
@@ -1252,4 +1253,64 @@ fn passive_tendon_jacobians_match_the_step() {
     coloured_vs_reference(&m, &s, &ctrl, Coordinates::Minimal, None);
     coloured_vs_reference(&m, &s, &ctrl, Coordinates::Maximal, None);
     check_rollout_vjp(&m, &s, 6, None);
+    // a model rebuilt with other contact models (the pyramid fallback's) keeps the damper's
+    // Newton blocks: the same step, bit for bit (it lost them before)
+    let pyramid = m
+        .with_contact_model(ContactModel::Nonlinear, ContactModel::Linear)
+        .unwrap();
+    let (mut a, mut b) = (s.clone(), s.moved_to(&pyramid));
+    step(&m, &mut a, &mut Workspace::new(&m), &ctrl).unwrap();
+    step(&pyramid, &mut b, &mut Workspace::new(&pyramid), &ctrl).unwrap();
+    assert_eq!(ukemi_engine::qvel(&m, &a), ukemi_engine::qvel(&pyramid, &b));
+}
+
+/// Dry friction on a tendon `L = q₀ - ½ q₂` over a chain of three hinges with motors: sliding
+/// (impulse at its bound) and sticking states, hard and smoothed.
+#[test]
+fn tendon_friction_jacobians_match_the_step() {
+    use ukemi_engine::model::PassiveTendonSpec;
+    let mut b = ModelBuilder::new().timestep(0.01);
+    for i in 0..3 {
+        let (name, parent) = (format!("l{i}"), format!("l{}", i.max(1) - 1));
+        let parent = if i == 0 { "world" } else { parent.as_str() };
+        let pa = if i == 0 { [0.0; 3] } else { [0.0, 0.0, -0.5] };
+        b = b
+            .body(BodySpec::new(&name, 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5 - i as f64]))
+            .joint(
+                JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
+                    .axis([0.0, 1.0, 0.0])
+                    .anchors(pa, [0.0, 0.0, 0.5]),
+            )
+            .actuator(ActuatorSpec::motor(
+                &format!("m{i}"),
+                &format!("j{i}"),
+                0,
+                1.0,
+            ));
+    }
+    b.add_passive_tendon(PassiveTendonSpec {
+        name: "t".into(),
+        terms: vec![("j0".into(), 0, 1.0), ("j2".into(), 0, -0.5)],
+        stiffness: 0.0,
+        springlength: None,
+        damping: 0.0,
+        frictionloss: 0.8,
+    });
+    let m = tight(b.compile().unwrap());
+    for (qvel, sliding) in [([2.0, 0.5, -1.5], true), ([0.0, 0.0, 0.0], false)] {
+        let s = moving_state(&m, &[0.3, -0.2, 0.1], &qvel);
+        let ctrl = [0.05, 0.2, 0.05];
+        let mut next = s.clone();
+        step(&m, &mut next, &mut Workspace::new(&m), &ctrl).unwrap();
+        let tau = next.tendon_friction_impulse(&m)[0];
+        eprintln!("sliding {sliding}: tendon friction impulse {tau}");
+        assert_eq!((tau.abs() - 0.8e-2).abs() < 1e-9, sliding, "{tau}");
+        let e = check(&m, &s, &ctrl, Coordinates::Minimal, None, 1e-6);
+        eprintln!("tendon friction, hard: max rel err {e:e}");
+        check(&m, &s, &ctrl, Coordinates::Minimal, Some(1e-4), 1e-5);
+        check(&m, &s, &ctrl, Coordinates::Maximal, None, 1e-6);
+        coloured_vs_reference(&m, &s, &ctrl, Coordinates::Minimal, None);
+        coloured_vs_reference(&m, &s, &ctrl, Coordinates::Maximal, Some(1e-4));
+        check_rollout_vjp(&m, &s, 6, None);
+    }
 }

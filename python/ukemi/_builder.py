@@ -206,12 +206,13 @@ class ModelBuilder:
         self._b.add_tendon_limit(str(name), parsed, (lo, hi))
 
     def add_passive_tendon(self, name: str, terms, stiffness: float = 0.0, damping: float = 0.0,
-                           springlength=None) -> None:
-        """A spring and a damper on a fixed tendon's length ``L = Σ coef·q`` (MuJoCo's
-        ``<tendon><fixed stiffness damping springlength>``): the tendon force
-        ``-stiffness (L - springlength) - damping L̇`` acts on each term's coordinate as
-        ``coef ·`` the force; the spring at the current configuration, the damper at the next
-        velocities (implicit, like a joint damper).
+                           springlength=None, frictionloss: float = 0.0) -> None:
+        """A spring, a damper and dry friction on a fixed tendon's length ``L = Σ coef·q``
+        (MuJoCo's ``<tendon><fixed stiffness damping springlength frictionloss>``): the tendon
+        force ``-stiffness (L - springlength) - damping L̇`` plus a friction force of at most
+        ``frictionloss`` against ``L̇`` acts on each term's coordinate as ``coef ·`` the force;
+        the spring at the current configuration, the damper at the next velocities (implicit,
+        like a joint damper), the friction as the joints' (``state.tendon_friction_impulse``).
 
         Args:
             name: Unique name.
@@ -220,12 +221,14 @@ class ModelBuilder:
             stiffness, damping: >= 0.
             springlength: Rest length (m or rad); None: the length at the joints' spring rest
                 positions (MuJoCo's default).
+            frictionloss: Dry friction (>= 0).
         """
         parsed = _tendon_terms(f"passive_tendon[{name}]", terms)
         rest = None if springlength is None else as_scalar(f"passive_tendon[{name}].springlength",
                                                            springlength)
         self._b.add_passive_tendon(str(name), parsed, as_scalar("stiffness", stiffness),
-                                   as_scalar("damping", damping), rest)
+                                   as_scalar("damping", damping), rest,
+                                   as_scalar("frictionloss", frictionloss))
 
     def add_pair(self, geom_a: str, geom_b: str, friction: float = 1.0,
                  contact: str = "nonlinear") -> None:

@@ -164,6 +164,11 @@ impl Support {
                 nodes.push(t.tendon_node[k]);
             }
         }
+        for (k, blocks) in t.tendon_friction_blocks.iter().enumerate() {
+            if blocks.iter().any(|&(b, _)| is_touched[b]) {
+                nodes.extend(t.tendon_friction_node[k]);
+            }
+        }
         nodes.extend(cs.iter().map(|&c| t.contact_node[c]));
         nodes.sort_unstable();
         nodes.dedup();

@@ -28,9 +28,10 @@ impl TendonLimit {
     }
 }
 
-/// A compiled passive fixed tendon (MuJoCo's `<tendon><fixed>` with `stiffness` or `damping`):
-/// a spring `-k (L - L₀)` at the current configuration and an implicit damper `-d L̇⁺` on the
-/// length `L = Σ coef q`, each acting on every term's coordinate as `coef ·` the tendon force.
+/// A compiled passive fixed tendon (MuJoCo's `<tendon><fixed>` with `stiffness`, `damping` or
+/// `frictionloss`): a spring `-k (L - L₀)` at the current configuration, an implicit damper
+/// `-d L̇⁺` and dry friction on the length `L = Σ coef q`, each acting on every term's
+/// coordinate as `coef ·` the tendon force.
 #[derive(Clone, Debug)]
 pub struct PassiveTendon {
     /// Unique name.
@@ -43,4 +44,7 @@ pub struct PassiveTendon {
     pub springlength: f64,
     /// Damping (N·s/m or N·m·s/rad per unit length), acting on the next velocities.
     pub damping: f64,
+    /// Dry friction on the tendon's length (N or N·m per unit length, MuJoCo's
+    /// `frictionloss`), solved as the joints' is ([`crate::solver::friction`]).
+    pub frictionloss: f64,
 }

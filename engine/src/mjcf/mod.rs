@@ -9,15 +9,15 @@
 //! `contact/pair` (friction and condim from the pair or its class, as MuJoCo), `equality`
 //! connect/weld (loop joints) and joint (a polynomial coupling solved with the joints), fixed
 //! tendons as actuator transmissions, when limited as hard tendon limits (inequalities solved
-//! with the contacts) and with `stiffness`/`damping`/`springlength` as passive springs and
-//! implicit dampers, `actuator` motor/position/velocity/general on joints, fixed
+//! with the contacts) and with `stiffness`/`damping`/`springlength`/`frictionloss` as passive
+//! springs, implicit dampers and dry friction, `actuator` motor/position/velocity/general on joints, fixed
 //! tendons and sites (with `forcerange`, and a position servo's `dampratio` turned into its
 //! velocity gain at qpos0 and its `inheritrange` into its control range, as MuJoCo does), joint
 //! `frictionloss` (hard dry friction, `solver::friction`), and `keyframe`.
 //!
 //! Anything else is an [`Error::Unsupported`] or an [`Error::Mjcf`] naming the element and its
 //! line, or — where ignoring it only drops an effect ukemi does not model (solver settings,
-//! fluid drag, tendon friction, passive tendons, sensors) — a warning in
+//! fluid drag, spatial tendons, sensors) — a warning in
 //! [`MjcfModel::warnings`]. Soft-contact parameters (`solref`, `solimp`, `margin`, `gap`,
 //! `priority`) do not apply to hard contact and are ignored without a warning.
 //!

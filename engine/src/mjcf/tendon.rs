@@ -10,9 +10,9 @@ use crate::{ModelBuilder, Result};
 /// Fixed tendons by name: `(engine joint, free dof, coef)` per MJCF joint term.
 pub(super) type Tendons = std::collections::HashMap<String, Vec<(String, usize, f64)>>;
 
-/// Fixed tendons (for actuators), their limits and their springs and dampers (added to `b`).
-/// Tendon friction and spring dead bands are unsupported; spatial tendons are ignored with a
-/// warning (a limited one is reported as not enforced; one with stiffness or damping is an
+/// Fixed tendons (for actuators), their limits, springs, dampers and dry friction (added to
+/// `b`). Spring dead bands are unsupported; spatial tendons are ignored with a warning (a
+/// limited one is reported as not enforced; one with stiffness, damping or friction is an
 /// error).
 pub(super) fn read_tendons<'a, 'i>(
     ctx: &mut Ctx<'a, 'i>,
@@ -29,14 +29,11 @@ pub(super) fn read_tendons<'a, 'i>(
             ctx.raw(t, &class, a)
                 .is_some_and(|v| v.trim().parse::<f64>() != Ok(0.0))
         };
-        if set("frictionloss") {
-            return Err(ctx.unsupported(t, "tendons with friction are not supported"));
-        }
-        let passive = set("stiffness") || set("damping");
+        let passive = set("stiffness") || set("damping") || set("frictionloss");
         if passive && t.tag_name().name() != "fixed" {
             return Err(ctx.unsupported(
                 t,
-                "spatial tendons with stiffness or damping are not supported",
+                "spatial tendons with stiffness, damping or friction are not supported",
             ));
         }
         let limited = ctx.tristate(t, &class, "limited")?;
@@ -98,10 +95,14 @@ pub(super) fn read_tendons<'a, 'i>(
         if passive {
             let stiffness = ctx.num(t, &class, "stiffness", 0.0)?;
             let damping = ctx.num(t, &class, "damping", 0.0)?;
-            if stiffness < 0.0 || damping < 0.0 {
+            let frictionloss = ctx.num(t, &class, "frictionloss", 0.0)?;
+            if stiffness < 0.0 || damping < 0.0 || frictionloss < 0.0 {
                 return Err(ctx.err(
                     t,
-                    format!("stiffness {stiffness} and damping {damping} must be >= 0"),
+                    format!(
+                        "stiffness {stiffness}, damping {damping} and frictionloss \
+                         {frictionloss} must be >= 0"
+                    ),
                 ));
             }
             // MuJoCo's springlength: -1 (the default) is the length at qpos0; two different
@@ -124,6 +125,7 @@ pub(super) fn read_tendons<'a, 'i>(
                 stiffness,
                 springlength,
                 damping,
+                frictionloss,
             });
         }
         out.insert(name, terms);

@@ -429,13 +429,7 @@ impl ModelBuilder {
         let couplings = compile_couplings(&self.couplings, &joints)?;
         let tendon_limits = compile_tendon_limits(&self.tendon_limits, &joints)?;
         let passive_tendons = compile_passive_tendons(&self.passive_tendons, &joints)?;
-        // implicit tendon dampers (servos' velocity gains, passive dampers) couple their bodies
         let actuators = self.compile_actuators(&joints, &bodies)?;
-        let mut damped_tendons = crate::solver::actuation::servo_tendons(&actuators);
-        damped_tendons.extend(
-            (passive_tendons.iter().filter(|t| t.damping > 0.0))
-                .map(|t| t.terms.iter().map(|&(j, _, _)| j).collect()),
-        );
         let topology = Topology::new(
             bodies.len(),
             &joints,
@@ -444,7 +438,7 @@ impl ModelBuilder {
             &contacts,
             &couplings,
             &tendon_limits,
-            &damped_tendons,
+            (&actuators, &passive_tendons),
         )
         .map_err(|e| Error::model("joints", "graph", e))?;
         let nq = joints.iter().filter(|j| !j.is_loop).map(Joint::nq).sum();

@@ -177,7 +177,7 @@ impl Model {
             &m.contacts,
             &m.couplings,
             &m.tendon_limits,
-            &crate::solver::actuation::servo_tendons(&m.actuators),
+            (&m.actuators, &m.passive_tendons),
         )
         .map_err(|e| crate::Error::model("joints", "graph", e))?;
         Ok(m)
@@ -193,6 +193,13 @@ impl Model {
     /// Number of joint dofs with dry friction (`frictionloss`).
     pub fn nfriction(&self) -> usize {
         self.joints.iter().map(|j| j.nfriction()).sum()
+    }
+    /// Number of passive tendons with dry friction.
+    pub fn ntendon_friction(&self) -> usize {
+        self.passive_tendons
+            .iter()
+            .filter(|t| t.frictionloss > 0.0)
+            .count()
     }
     /// Unknowns of one step per effect: `(name, count)` for body velocities, joint impulses, limit
     /// variables, contact variables of each model, tendon-limit and joint-friction variables.
@@ -216,6 +223,7 @@ impl Model {
             ("contact_linear_cone", per(Linear)),
             ("tendon_limit", 4 * self.tendon_limits.len()),
             ("joint_friction", 4 * self.nfriction()),
+            ("tendon_friction", 4 * self.ntendon_friction()),
         ]
     }
     /// What node `n` of the Newton matrix's graph is, for messages: a body, a joint, a joint's
@@ -244,6 +252,12 @@ impl Model {
         }
         if let Some(j) = t.friction_node.iter().position(|&x| x == Some(n)) {
             return format!("the dry friction of joint '{}'", self.joints[j].name);
+        }
+        if let Some(k) = t.tendon_friction_node.iter().position(|&x| x == Some(n)) {
+            return format!(
+                "the dry friction of tendon '{}'",
+                self.passive_tendons[k].name
+            );
         }
         format!("node {n}")
     }

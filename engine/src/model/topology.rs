@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use crate::contact::{Contact, ContactModel, Geom};
 use crate::joints::Joint;
 use crate::joints::coupling::Coupling;
-use crate::joints::tendon::TendonLimit;
+use crate::joints::tendon::{PassiveTendon, TendonLimit};
 use crate::solver::graph_ldu::BlockPattern;
 
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
@@ -68,6 +68,12 @@ pub(crate) struct Topology {
     /// Per tendon limit, each distinct moving body of its joints with its (node row, body col)
     /// and (body row, node col) blocks.
     pub tendon_blocks: Vec<Vec<(usize, (usize, usize))>>,
+    /// Node of each passive tendon's dry-friction variables (`[δ_fw, s_fw, δ_bw, s_bw]`),
+    /// numbered after the joints' and eliminated first, as a leaf.
+    pub tendon_friction_node: Vec<Option<usize>>,
+    /// Per passive tendon with friction, each distinct moving body of its joints with its
+    /// (node row, body col) and (body row, node col) blocks.
+    pub tendon_friction_blocks: Vec<Vec<(usize, (usize, usize))>>,
     /// Index of each winding hinge's turns in [`crate::State`]'s winding ([`Joint::winds`]).
     pub winding_adr: Vec<Option<usize>>,
     /// Node of each joint's dry-friction variables (4 per dof with `frictionloss`:
@@ -97,6 +103,17 @@ pub(crate) struct Topology {
     pub slide_candidates: Vec<usize>,
 }
 
+impl Topology {
+    /// The dry-friction nodes, joints' then passive tendons', in node order.
+    pub fn friction_nodes(&self) -> impl Iterator<Item = usize> + '_ {
+        self.friction_node
+            .iter()
+            .chain(&self.tendon_friction_node)
+            .flatten()
+            .copied()
+    }
+}
+
 /// Graph node of a moving body.
 pub(crate) fn body_node(b: usize) -> Option<usize> {
     b.checked_sub(1)
@@ -113,7 +130,7 @@ impl Topology {
         contacts: &[Contact],
         couplings: &[Coupling],
         tendons: &[TendonLimit],
-        servo_tendons: &[Vec<usize>],
+        (actuators, passive): (&[crate::model::Actuator], &[PassiveTendon]),
     ) -> Result<Self, String> {
         let nmoving = nbody - 1;
         let mut dims = vec![6; nmoving];
@@ -177,7 +194,28 @@ impl Topology {
                 cone_degree += 2 * joint.nfriction();
             }
         }
+        // dry tendon friction: numbered last, eliminated first as a leaf although it fills in
+        // between its joints' bodies. Eliminated late like a tendon limit, a sliding tendon's
+        // pivots (room ~1e-12 against a displacement ~1e-2) came after the bodies' Schur
+        // updates and the solve stalled: a three-link chain at rtol 1e-14 took 27 iterations
+        // and ended `acceptable` at 1e-12, against 5 iterations converged as a leaf.
+        let mut tendon_friction_node = vec![None; passive.len()];
+        let mut tendon_friction_bodies = vec![Vec::new(); passive.len()];
+        for (k, t) in passive.iter().enumerate() {
+            if t.frictionloss > 0.0 {
+                tendon_friction_node[k] = Some(dims.len());
+                leaves.push(dims.len());
+                dims.push(4);
+                tendon_friction_bodies[k] = moving_bodies(joints, t.terms.iter().map(|t| t.0));
+                cone_degree += 2;
+            }
+        }
         let mut edges = Vec::new();
+        for (k, bodies) in tendon_friction_bodies.iter().enumerate() {
+            if let Some(n) = tendon_friction_node[k] {
+                edges.extend(bodies.iter().filter_map(|&b| Some((n, body_node(b)?))));
+            }
+        }
         for (c, bodies) in coupling_bodies.iter().enumerate() {
             edges.extend(
                 bodies
@@ -203,9 +241,9 @@ impl Topology {
                 edges.extend(body_node(*b).map(|b| (contact_node[c], b)));
             }
         }
-        // a tendon servo's implicit velocity gain couples every pair of its joints' bodies
-        // (`actuation::split_force`)
-        for terms in servo_tendons {
+        // an implicit tendon damper (a tendon servo's velocity gain, `actuation::split_force`;
+        // a passive tendon's damping) couples every pair of its joints' bodies
+        for terms in &crate::solver::actuation::damped_tendons(actuators, passive) {
             let bodies = moving_bodies(joints, terms.iter().copied());
             for (i, &a) in bodies.iter().enumerate() {
                 for &b in &bodies[i + 1..] {
@@ -241,6 +279,7 @@ impl Topology {
             (tendons.iter().zip(&tendon_node))
                 .map(|(t, &n)| (n, t.terms.iter().map(|t| t.0).collect())),
         );
+
         order.extend(elimination_order(
             nmoving,
             joints,
@@ -286,6 +325,17 @@ impl Topology {
             .map(|(j, joint)| match friction_node[j] {
                 Some(n) => [pair(n, joint.parent), pair(n, joint.child)],
                 None => [None, None],
+            })
+            .collect();
+        let tendon_friction_blocks = tendon_friction_bodies
+            .iter()
+            .enumerate()
+            .map(|(k, bodies)| match tendon_friction_node[k] {
+                Some(n) => bodies
+                    .iter()
+                    .filter_map(|&b| Some((b, pair(n, b)?)))
+                    .collect(),
+                None => Vec::new(),
             })
             .collect();
         let coupling_blocks = coupling_bodies
@@ -347,6 +397,8 @@ impl Topology {
             tendon_blocks,
             friction_node,
             friction_blocks,
+            tendon_friction_node,
+            tendon_friction_blocks,
             winding_adr: {
                 let mut k = 0;
                 joints

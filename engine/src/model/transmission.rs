@@ -105,8 +105,8 @@ pub struct TendonLimitSpec {
     pub range: (f64, f64),
 }
 
-/// A passive fixed tendon to add (MuJoCo's `<tendon><fixed stiffness damping springlength>`):
-/// a spring and a damper on `L = Σ coef q`.
+/// A passive fixed tendon to add (MuJoCo's `<tendon><fixed stiffness damping springlength
+/// frictionloss>`): a spring, a damper and dry friction on `L = Σ coef q`.
 #[derive(Clone, Debug)]
 pub struct PassiveTendonSpec {
     /// Unique name.
@@ -120,6 +120,8 @@ pub struct PassiveTendonSpec {
     pub springlength: Option<f64>,
     /// Damping (≥ 0), implicit.
     pub damping: f64,
+    /// Dry friction (≥ 0, MuJoCo's `frictionloss`).
+    pub frictionloss: f64,
 }
 
 /// Index of a named joint's scalar (hinge or slide) free dof.
@@ -314,7 +316,11 @@ pub(super) fn compile_passive_tendons(
             !out.iter().any(|t| t.name == spec.name),
             Error::model(f("name"), &spec.name, "duplicate passive tendon name")
         );
-        for (what, v) in [("stiffness", spec.stiffness), ("damping", spec.damping)] {
+        for (what, v) in [
+            ("stiffness", spec.stiffness),
+            ("damping", spec.damping),
+            ("frictionloss", spec.frictionloss),
+        ] {
             ensure!(
                 v.is_finite() && v >= 0.0,
                 Error::model(f(what), v, "must be finite and >= 0")
@@ -362,6 +368,7 @@ pub(super) fn compile_passive_tendons(
             stiffness: spec.stiffness,
             springlength: spec.springlength.unwrap_or(at_rest),
             damping: spec.damping,
+            frictionloss: spec.frictionloss,
         });
     }
     Ok(out)

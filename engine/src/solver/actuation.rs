@@ -14,7 +14,7 @@
 //! pose shook at ±3.5 rad/s, as it does in MuJoCo with the Euler integrator (its MJCF asks for
 //! `implicitfast`), and a rollout's adjoints grew ~10× every 25 steps. A fixed-tendon servo's
 //! velocity term is implicit the same way, a damper on the tendon's rate coupling every pair
-//! of its joints' bodies (the topology links them: [`servo_tendons`]); a site keeps none.
+//! of its joints' bodies (the topology links them: [`damped_tendons`]); a site keeps none.
 use nalgebra::Vector3;
 
 use crate::math::quat;
@@ -107,17 +107,23 @@ pub(crate) fn split_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> 
     }
 }
 
-/// The joints of each fixed-tendon actuator with a velocity gain (`bias₂ ≠ 0`): the body pairs
-/// its implicit damping couples need blocks in the Newton matrix ([`split_force`]).
-pub(crate) fn servo_tendons(actuators: &[Actuator]) -> Vec<Vec<usize>> {
-    actuators
+/// The joints of each implicit tendon damper: every fixed-tendon actuator with a velocity gain
+/// (`bias₂ ≠ 0`, [`split_force`]) and every passive tendon with damping. The body pairs its
+/// damping couples need blocks in the Newton matrix.
+pub(crate) fn damped_tendons(
+    actuators: &[Actuator],
+    passive: &[crate::joints::tendon::PassiveTendon],
+) -> Vec<Vec<usize>> {
+    let servos = actuators
         .iter()
         .filter(|a| a.bias[2] != 0.0)
         .filter_map(|a| match &a.transmission {
             Transmission::Tendon(terms) => Some(terms.iter().map(|t| t.0).collect()),
             _ => None,
-        })
-        .collect()
+        });
+    let dampers = (passive.iter().filter(|t| t.damping > 0.0))
+        .map(|t| t.terms.iter().map(|&(j, _, _)| j).collect());
+    servos.chain(dampers).collect()
 }
 
 /// Scalar force of every actuator into `ws.act_force`, and the servos' implicit velocity gains

@@ -300,9 +300,9 @@ pub(crate) fn centre_some(
     }
     // dry joint friction: each side's displacement and its room to the bound (the equality rows
     // `s_fw + s_bw = 2 f h` and `δ_fw - δ_bw = h θ̇⁺` are left to the Newton steps at κ)
-    for n in t.friction_node.iter().flatten() {
-        let o = t.pattern.offset(*n);
-        for i in 0..t.pattern.dim(*n) / 4 {
+    for n in t.friction_nodes() {
+        let o = t.pattern.offset(n);
+        for i in 0..t.pattern.dim(n) / 4 {
             for (g, s) in [(o + 4 * i, o + 4 * i + 1), (o + 4 * i + 2, o + 4 * i + 3)] {
                 (ws.w[g], ws.w[s]) = orthant_pair(ws.w[g], ws.w[s], kappa);
             }

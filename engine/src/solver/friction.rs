@@ -20,6 +20,10 @@
 //! 1-2) took 10.7 and 10.5 iterations a step like this (10.0 and 10.2 without friction),
 //! 18.1 and 17.4 with rates `θ̇` for `δ`, and 61 and 62 with the room in units of the bound.
 //!
+//! A passive tendon's friction (MuJoCo's tendon `frictionloss`) is the same node on the tendon's
+//! length `L = Σ coef q`: its displacement `h Σ coef J_f w⁺`, its impulse acting on every term
+//! as `coef τ`.
+//!
 //! A sticking joint has `δ_fw = δ_bw = 0` and `|τ| < f h`: it holds any load below its
 //! friction, exactly, with no creep (MuJoCo's frictionloss is a soft constraint and creeps).
 //! The pairs are always active: a joint with friction may start or stop in any step.
@@ -53,6 +57,38 @@ pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut 
                     let ob = t.pattern.offset(bn);
                     for k in 0..6 {
                         residual[ob + k] += jf[6 * side + k] * tau;
+                    }
+                }
+            }
+        }
+    }
+    // a tendon's: its length's rate `Σ coef J_f w⁺`, its impulse on every term as `coef τ`
+    for (k, tendon) in model.passive_tendons.iter().enumerate() {
+        let Some(n) = t.tendon_friction_node[k] else {
+            continue;
+        };
+        let o = t.pattern.offset(n);
+        let jf = |j: usize, d: usize| &ws.free_jac[ws.free_adr[j] + 12 * d..][..12];
+        let rate: f64 = (tendon.terms.iter())
+            .map(|&(j, d, c)| {
+                let joint = &model.joints[j];
+                c * free_rate(model, joint.parent, joint.child, jf(j, d), w)
+            })
+            .sum();
+        let x = &w[o..o + 4];
+        let r = &mut residual[o..o + 4];
+        r[0] = x[1] + x[3] - 2.0 * tendon.frictionloss * h;
+        r[1] = x[0] * x[1];
+        r[2] = x[0] - x[2] - h * rate;
+        r[3] = x[2] * x[3];
+        let tau = 0.5 * (x[3] - x[1]);
+        for &(j, d, c) in &tendon.terms {
+            let joint = &model.joints[j];
+            for (side, b) in [(0, joint.parent), (1, joint.child)] {
+                if let Some(bn) = body_node(b) {
+                    let ob = t.pattern.offset(bn);
+                    for i in 0..6 {
+                        residual[ob + i] += c * jf(j, d)[6 * side + i] * tau;
                     }
                 }
             }
@@ -108,6 +144,40 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64]) {
                     vals[row_n + (4 * i + 2) * 6 + k] = -h * jf; // r₂ = … - h J_f w⁺
                     vals[row_b + k * dim + 4 * i + 1] = -0.5 * jf; // τ = (s_bw - s_fw) / 2
                     vals[row_b + k * dim + 4 * i + 3] = 0.5 * jf;
+                }
+            }
+        }
+    }
+    for (k, tendon) in model.passive_tendons.iter().enumerate() {
+        let Some(n) = t.tendon_friction_node[k] else {
+            continue;
+        };
+        let o = t.pattern.offset(n);
+        let x = &w[o..o + 4];
+        if let Some(diag) = t.pattern.block(n, n) {
+            let d = &mut ws.matrix.values[diag..diag + 16];
+            d.fill(0.0);
+            (d[1], d[3]) = (1.0, 1.0);
+            (d[4], d[5]) = (x[1], x[0]);
+            (d[8], d[10]) = (1.0, -1.0);
+            (d[14], d[15]) = (x[3], x[2]);
+        }
+        // terms may share a body: each adds its share (the blocks start at zero)
+        for &(b, (row_n, row_b)) in &t.tendon_friction_blocks[k] {
+            for &(j, dof, c) in &tendon.terms {
+                let joint = &model.joints[j];
+                for (side, jb) in [(0, joint.parent), (1, joint.child)] {
+                    if jb != b {
+                        continue;
+                    }
+                    let fa = ws.free_adr[j] + 12 * dof + 6 * side;
+                    let vals = &mut ws.matrix.values;
+                    for i in 0..6 {
+                        let jf = c * ws.free_jac[fa + i];
+                        vals[row_n + 2 * 6 + i] -= h * jf; // r₂ = … - h Σ coef J_f w⁺
+                        vals[row_b + 4 * i + 1] -= 0.5 * jf; // τ = (s_bw - s_fw) / 2
+                        vals[row_b + 4 * i + 3] += 0.5 * jf;
+                    }
                 }
             }
         }

@@ -69,7 +69,8 @@ pub(crate) fn for_each_pair_except(
 
 /// [`for_each_pair_except`], also passing who owns the pair (its activation flag's index): `c`
 /// for contact candidate `c`, `ncontact + j` for a limit of joint `j`, `ncontact + njoint + k`
-/// for tendon limit `k`, `ncontact + njoint + ntendon + j` for joint `j`'s dry friction.
+/// for tendon limit `k`, `ncontact + njoint + ntendon + j` for joint `j`'s dry friction and
+/// `ncontact + 2 njoint + ntendon + k` for passive tendon `k`'s.
 pub(crate) fn for_each_owned_pair(
     model: &Model,
     active: &[bool],
@@ -108,9 +109,10 @@ pub(crate) fn for_each_owned_pair(
             f(tendons + k, t.pattern.offset(n), p, d, r, false);
         }
     }
-    // dry joint friction: always active (owners past the activation flags)
+    // dry friction, joints' then tendons': always active (owners past the activation flags)
     let frictions = tendons + t.tendon_node.len();
-    for (j, n) in t.friction_node.iter().enumerate() {
+    let nodes = t.friction_node.iter().chain(&t.tendon_friction_node);
+    for (j, n) in nodes.enumerate() {
         let Some(n) = *n else { continue };
         for i in 0..t.pattern.dim(n) / 4 {
             for &(p, d, r) in &LIMIT_PAIRS {
@@ -191,15 +193,16 @@ pub(crate) fn initialize_from(
                 .map(|(j, n)| n.map(|_| nc + j)),
         )
         .chain((0..t.tendon_node.len()).map(|i| Some(nc + model.njoint() + i)))
-        .chain(t.friction_node.iter().map(|n| n.map(|_| usize::MAX)))
+        .chain(t.friction_nodes().map(|_| Some(usize::MAX)))
         .flatten();
     let nodes = t
         .contact_node
         .iter()
         .chain(t.limit_node.iter().flatten())
         .chain(&t.tendon_node)
-        .chain(t.friction_node.iter().flatten())
-        .map(|&n| (n, t.pattern.dim(n)));
+        .copied()
+        .chain(t.friction_nodes())
+        .map(|n| (n, t.pattern.dim(n)));
     for ((n, dim), owner) in nodes.zip(owners) {
         let o = t.pattern.offset(n);
         // (dry friction, owner `usize::MAX`, is always active)
@@ -638,9 +641,9 @@ fn violations(
             eq(t.pattern.offset(n), &[0, 2], residual, &mut rvio);
         }
     }
-    for n in t.friction_node.iter().flatten() {
-        for i in 0..t.pattern.dim(*n) / 4 {
-            eq(t.pattern.offset(*n) + 4 * i, &[0, 2], residual, &mut rvio);
+    for n in t.friction_nodes() {
+        for i in 0..t.pattern.dim(n) / 4 {
+            eq(t.pattern.offset(n) + 4 * i, &[0, 2], residual, &mut rvio);
         }
     }
     (rvio, kvio)
@@ -1110,7 +1113,7 @@ pub(crate) fn store(model: &Model, state: &mut State, ws: &Workspace) {
         }
         k += dim;
     }
-    for &n in t.friction_node.iter().flatten() {
+    for n in t.friction_nodes() {
         let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
         state.ineq_vars[k..k + dim].copy_from_slice(&ws.w[o..o + dim]);
         k += dim;

@@ -1387,6 +1387,56 @@ mod tests {
         b.compile().unwrap()
     }
 
+    /// Dry friction on every joint of the tendon model and on a tendon over non-adjacent
+    /// joints, with a passive tendon spring and damper: the assembled blocks are the residual's
+    /// derivatives.
+    #[test]
+    fn newton_matrix_with_dry_friction_and_passive_tendons_matches_finite_differences() {
+        use crate::model::PassiveTendonSpec;
+        let base = tendon_model(&[("j0", 0.5), ("j2", -2.0)], (-0.2, 0.3), false);
+        let mut b = ModelBuilder::new().timestep(0.02);
+        for (i, body) in base.bodies.iter().enumerate().skip(1) {
+            b = b.body(BodySpec::new(&body.name, body.mass, [0.1, 0.2, 0.15]).pos([
+                0.0,
+                0.0,
+                -0.5 - (i - 1) as f64,
+            ]));
+        }
+        let kinds = [
+            JointKind::Prismatic,
+            JointKind::Revolute,
+            JointKind::Prismatic,
+        ];
+        for (i, kind) in kinds.iter().enumerate() {
+            let parent = if i == 0 {
+                "world".into()
+            } else {
+                format!("b{}", i - 1)
+            };
+            let z = if i == 0 { 0.0 } else { -0.5 };
+            b = b.joint(
+                JointSpec::new(&format!("j{i}"), *kind, &parent, &format!("b{i}"))
+                    .axis([0.3, 1.0, 0.2 * i as f64])
+                    .anchors([0.0, 0.0, z], [0.0, 0.0, 0.5])
+                    .frictionloss(0.7 + i as f64),
+            );
+        }
+        b.add_passive_tendon(PassiveTendonSpec {
+            name: "t".into(),
+            terms: vec![("j0".into(), 0, 0.5), ("j2".into(), 0, -2.0)],
+            stiffness: 3.0,
+            springlength: Some(0.1),
+            damping: 2.0,
+            frictionloss: 1.5,
+        });
+        let model = b.compile().unwrap();
+        assert_eq!(
+            model.variable_counts()[7..],
+            [("joint_friction", 12), ("tendon_friction", 4)]
+        );
+        check_newton_matrix(&model, 0.3);
+    }
+
     #[test]
     fn newton_matrix_with_a_tendon_limit_matches_finite_differences() {
         // slide coordinates: their free-Jacobian rows are exact derivatives everywhere (a

@@ -202,7 +202,7 @@ pub(crate) fn weight(
         };
         s.limit_adr[j] + (o - model.topology.pattern.offset(node)) / 4
     } else if owner >= nc + nj + model.tendon_limits.len() {
-        return 1.0; // dry joint friction: always within reach
+        return 1.0; // dry friction: always within reach
     } else {
         // tendon limits follow the joints' limited coordinates
         s.limit_slack.len() - model.tendon_limits.len() + (owner - nc - nj)
