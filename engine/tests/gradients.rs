@@ -1148,23 +1148,20 @@ fn tendon_limits_are_tapered_continuously_with_exact_gradients() {
     check_rollout_vjp(&m, &at(0.03, -0.5, 0.1), 3, Some(1e-3));
 }
 
-/// Three hinged links with dry friction and motors: one hinge slides, one sticks, one turns
-/// the other way (each strictly complementary, so the hard step is smooth at this state).
-fn friction_chain() -> Model {
+/// Three hinged links hanging along -z (hinges about y) with a motor each; `joint` dresses
+/// each joint spec (`i`, spec).
+fn motor_chain(joint: impl Fn(usize, JointSpec) -> JointSpec) -> ModelBuilder {
     let mut b = ModelBuilder::new().timestep(0.01);
     for i in 0..3 {
         let (name, parent) = (format!("l{i}"), format!("l{}", i.max(1) - 1));
         let parent = if i == 0 { "world" } else { parent.as_str() };
         let pa = if i == 0 { [0.0; 3] } else { [0.0, 0.0, -0.5] };
+        let spec = JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
+            .axis([0.0, 1.0, 0.0])
+            .anchors(pa, [0.0, 0.0, 0.5]);
         b = b
             .body(BodySpec::new(&name, 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5 - i as f64]))
-            .joint(
-                JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
-                    .axis([0.0, 1.0, 0.0])
-                    .anchors(pa, [0.0, 0.0, 0.5])
-                    .damping(0.1)
-                    .frictionloss(0.5 + i as f64),
-            )
+            .joint(joint(i, spec))
             .actuator(ActuatorSpec::motor(
                 &format!("m{i}"),
                 &format!("j{i}"),
@@ -1172,6 +1169,13 @@ fn friction_chain() -> Model {
                 1.0,
             ));
     }
+    b
+}
+
+/// Three hinged links with dry friction and motors: one hinge slides, one sticks, one turns
+/// the other way (each strictly complementary, so the hard step is smooth at this state).
+fn friction_chain() -> Model {
+    let b = motor_chain(|i, j| j.damping(0.1).frictionloss(0.5 + i as f64));
     tight(b.compile().unwrap())
 }
 
@@ -1217,25 +1221,7 @@ fn dry_joint_friction_jacobians_match_the_step() {
 #[test]
 fn passive_tendon_jacobians_match_the_step() {
     use ukemi_engine::model::PassiveTendonSpec;
-    let mut b = ModelBuilder::new().timestep(0.01);
-    for i in 0..3 {
-        let (name, parent) = (format!("l{i}"), format!("l{}", i.max(1) - 1));
-        let parent = if i == 0 { "world" } else { parent.as_str() };
-        let pa = if i == 0 { [0.0; 3] } else { [0.0, 0.0, -0.5] };
-        b = b
-            .body(BodySpec::new(&name, 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5 - i as f64]))
-            .joint(
-                JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
-                    .axis([0.0, 1.0, 0.0])
-                    .anchors(pa, [0.0, 0.0, 0.5]),
-            )
-            .actuator(ActuatorSpec::motor(
-                &format!("m{i}"),
-                &format!("j{i}"),
-                0,
-                1.0,
-            ));
-    }
+    let mut b = motor_chain(|_, j| j);
     b.add_passive_tendon(PassiveTendonSpec {
         name: "t".into(),
         terms: vec![("j0".into(), 0, 1.0), ("j2".into(), 0, -0.5)],
@@ -1269,25 +1255,7 @@ fn passive_tendon_jacobians_match_the_step() {
 #[test]
 fn tendon_friction_jacobians_match_the_step() {
     use ukemi_engine::model::PassiveTendonSpec;
-    let mut b = ModelBuilder::new().timestep(0.01);
-    for i in 0..3 {
-        let (name, parent) = (format!("l{i}"), format!("l{}", i.max(1) - 1));
-        let parent = if i == 0 { "world" } else { parent.as_str() };
-        let pa = if i == 0 { [0.0; 3] } else { [0.0, 0.0, -0.5] };
-        b = b
-            .body(BodySpec::new(&name, 1.0, [0.08, 0.08, 0.01]).pos([0.0, 0.0, -0.5 - i as f64]))
-            .joint(
-                JointSpec::new(&format!("j{i}"), JointKind::Revolute, parent, &name)
-                    .axis([0.0, 1.0, 0.0])
-                    .anchors(pa, [0.0, 0.0, 0.5]),
-            )
-            .actuator(ActuatorSpec::motor(
-                &format!("m{i}"),
-                &format!("j{i}"),
-                0,
-                1.0,
-            ));
-    }
+    let mut b = motor_chain(|_, j| j);
     b.add_passive_tendon(PassiveTendonSpec {
         name: "t".into(),
         terms: vec![("j0".into(), 0, 1.0), ("j2".into(), 0, -0.5)],

@@ -263,6 +263,33 @@ pub(super) fn compile_couplings(specs: &[CouplingSpec], joints: &[Joint]) -> Res
     Ok(out)
 }
 
+/// A fixed tendon's terms `(joint, free dof, coef)`: hinge or slide coordinates, finite
+/// coefficients, at least one non-zero; `f` names the fields.
+fn compile_terms(
+    terms: &[(String, usize, f64)],
+    joints: &[Joint],
+    f: &dyn Fn(&str) -> String,
+) -> Result<Vec<(usize, usize, f64)>> {
+    ensure!(
+        terms.iter().any(|t| t.2 != 0.0),
+        Error::model(
+            f("terms"),
+            terms,
+            "need at least one joint with a non-zero coef"
+        )
+    );
+    let mut out = Vec::with_capacity(terms.len());
+    for (name, dof, coef) in terms {
+        ensure!(
+            coef.is_finite(),
+            Error::model(f("terms.coef"), coef, "must be finite")
+        );
+        let (j, d) = scalar_dof(joints, name, *dof, &f("terms.joint"))?;
+        out.push((j, d, *coef));
+    }
+    Ok(out)
+}
+
 pub(super) fn compile_tendon_limits(
     specs: &[TendonLimitSpec],
     joints: &[Joint],
@@ -279,23 +306,7 @@ pub(super) fn compile_tendon_limits(
             lo.is_finite() && hi.is_finite() && lo < hi,
             Error::model(f("range"), spec.range, "need finite lower < upper")
         );
-        ensure!(
-            spec.terms.iter().any(|t| t.2 != 0.0),
-            Error::model(
-                f("terms"),
-                &spec.terms,
-                "need at least one joint with a non-zero coef"
-            )
-        );
-        let mut terms = Vec::with_capacity(spec.terms.len());
-        for (name, dof, coef) in &spec.terms {
-            ensure!(
-                coef.is_finite(),
-                Error::model(f("terms.coef"), coef, "must be finite")
-            );
-            let (j, d) = scalar_dof(joints, name, *dof, &f("terms.joint"))?;
-            terms.push((j, d, *coef));
-        }
+        let terms = compile_terms(&spec.terms, joints, &f)?;
         out.push(TendonLimit {
             name: spec.name.clone(),
             terms,
@@ -332,23 +343,7 @@ pub(super) fn compile_passive_tendons(
                 Error::model(f("springlength"), l, "must be finite")
             );
         }
-        ensure!(
-            spec.terms.iter().any(|t| t.2 != 0.0),
-            Error::model(
-                f("terms"),
-                &spec.terms,
-                "need at least one joint with a non-zero coef"
-            )
-        );
-        let mut terms = Vec::with_capacity(spec.terms.len());
-        for (name, dof, coef) in &spec.terms {
-            ensure!(
-                coef.is_finite(),
-                Error::model(f("terms.coef"), coef, "must be finite")
-            );
-            let (j, d) = scalar_dof(joints, name, *dof, &f("terms.joint"))?;
-            terms.push((j, d, *coef));
-        }
+        let terms = compile_terms(&spec.terms, joints, &f)?;
         // MuJoCo's springlength -1: the length at the joints' spring rest positions
         // (`springref`; the reference configuration where a joint has none)
         let at_rest: f64 = terms
