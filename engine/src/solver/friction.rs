@@ -119,20 +119,10 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64]) {
         };
         let (o, dim) = (t.pattern.offset(n), t.pattern.dim(n));
         if let Some(diag) = t.pattern.block(n, n) {
-            let d = &mut ws.matrix.values[diag..diag + dim * dim];
-            d.fill(0.0);
-            for i in 0..dim / 4 {
-                let x = &w[o + 4 * i..o + 4 * i + 4];
-                let at = |r: usize, c: usize| (4 * i + r) * dim + 4 * i + c;
-                d[at(0, 1)] = 1.0;
-                d[at(0, 3)] = 1.0;
-                d[at(1, 0)] = x[1];
-                d[at(1, 1)] = x[0];
-                d[at(2, 0)] = 1.0;
-                d[at(2, 2)] = -1.0;
-                d[at(3, 2)] = x[3];
-                d[at(3, 3)] = x[2];
-            }
+            diagonal(
+                &mut ws.matrix.values[diag..diag + dim * dim],
+                &w[o..o + dim],
+            );
         }
         for (side, blk) in t.friction_blocks[j].iter().enumerate() {
             let Some((row_n, row_b)) = *blk else { continue };
@@ -153,14 +143,8 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64]) {
             continue;
         };
         let o = t.pattern.offset(n);
-        let x = &w[o..o + 4];
         if let Some(diag) = t.pattern.block(n, n) {
-            let d = &mut ws.matrix.values[diag..diag + 16];
-            d.fill(0.0);
-            (d[1], d[3]) = (1.0, 1.0);
-            (d[4], d[5]) = (x[1], x[0]);
-            (d[8], d[10]) = (1.0, -1.0);
-            (d[14], d[15]) = (x[3], x[2]);
+            diagonal(&mut ws.matrix.values[diag..diag + 16], &w[o..o + 4]);
         }
         // terms may share a body: each adds its share (the blocks start at zero)
         for &(b, (row_n, row_b)) in &t.tendon_friction_blocks[k] {
@@ -181,6 +165,21 @@ pub(crate) fn assemble(model: &Model, ws: &mut Workspace, w: &[f64]) {
                 }
             }
         }
+    }
+}
+
+/// The diagonal block `d` of a friction node with variables `x` (4 per dof, `dim = x.len()`):
+/// per dof the band row `[0, 1, 0, 1]`, the complementarity rows and the displacement row
+/// `[1, 0, -1, 0]`.
+fn diagonal(d: &mut [f64], x: &[f64]) {
+    let dim = x.len();
+    d.fill(0.0);
+    for (i, x) in x.chunks_exact(4).enumerate() {
+        let at = |r: usize, c: usize| (4 * i + r) * dim + 4 * i + c;
+        (d[at(0, 1)], d[at(0, 3)]) = (1.0, 1.0);
+        (d[at(1, 0)], d[at(1, 1)]) = (x[1], x[0]);
+        (d[at(2, 0)], d[at(2, 2)]) = (1.0, -1.0);
+        (d[at(3, 2)], d[at(3, 3)]) = (x[3], x[2]);
     }
 }
 
