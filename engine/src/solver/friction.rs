@@ -45,21 +45,9 @@ pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut 
         for (i, (dof, f)) in joint.friction_dofs().enumerate() {
             let jf = &ws.free_jac[ws.free_adr[j] + 12 * dof..ws.free_adr[j] + 12 * dof + 12];
             let rate = free_rate(model, joint.parent, joint.child, jf, w);
-            let x = &w[o + 4 * i..o + 4 * i + 4];
             let r = &mut residual[o + 4 * i..o + 4 * i + 4];
-            r[0] = x[1] + x[3] - 2.0 * f * h;
-            r[1] = x[0] * x[1];
-            r[2] = x[0] - x[2] - h * rate;
-            r[3] = x[2] * x[3];
-            let tau = 0.5 * (x[3] - x[1]);
-            for (side, b) in [(0, joint.parent), (1, joint.child)] {
-                if let Some(bn) = body_node(b) {
-                    let ob = t.pattern.offset(bn);
-                    for k in 0..6 {
-                        residual[ob + k] += jf[6 * side + k] * tau;
-                    }
-                }
-            }
+            let tau = pair_rows(r, &w[o + 4 * i..o + 4 * i + 4], f * h, h * rate);
+            add_impulse(model, joint, jf, tau, residual);
         }
     }
     // a tendon's: its length's rate `Σ coef J_f w⁺`, its impulse on every term as `coef τ`
@@ -75,22 +63,31 @@ pub(crate) fn add_rows(model: &Model, ws: &Workspace, w: &[f64], residual: &mut 
                 c * free_rate(model, joint.parent, joint.child, jf(j, d), w)
             })
             .sum();
-        let x = &w[o..o + 4];
         let r = &mut residual[o..o + 4];
-        r[0] = x[1] + x[3] - 2.0 * tendon.frictionloss * h;
-        r[1] = x[0] * x[1];
-        r[2] = x[0] - x[2] - h * rate;
-        r[3] = x[2] * x[3];
-        let tau = 0.5 * (x[3] - x[1]);
+        let tau = pair_rows(r, &w[o..o + 4], tendon.frictionloss * h, h * rate);
         for &(j, d, c) in &tendon.terms {
-            let joint = &model.joints[j];
-            for (side, b) in [(0, joint.parent), (1, joint.child)] {
-                if let Some(bn) = body_node(b) {
-                    let ob = t.pattern.offset(bn);
-                    for i in 0..6 {
-                        residual[ob + i] += c * jf(j, d)[6 * side + i] * tau;
-                    }
-                }
+            add_impulse(model, &model.joints[j], jf(j, d), c * tau, residual);
+        }
+    }
+}
+
+/// The rows of one dof's friction variables `x` with bound `f h` and displacement `h θ̇⁺`
+/// (products only: `inequality::violations` shifts them by κ); returns its impulse `τ`.
+fn pair_rows(r: &mut [f64], x: &[f64], bound: f64, displacement: f64) -> f64 {
+    r[0] = x[1] + x[3] - 2.0 * bound;
+    r[1] = x[0] * x[1];
+    r[2] = x[0] - x[2] - displacement;
+    r[3] = x[2] * x[3];
+    0.5 * (x[3] - x[1])
+}
+
+/// `r_b += J_f,bᵀ τ` on the body rows of `joint`'s parent and child (`jf` a free dof's row).
+fn add_impulse(model: &Model, joint: &crate::joints::Joint, jf: &[f64], tau: f64, r: &mut [f64]) {
+    for (side, b) in [(0, joint.parent), (1, joint.child)] {
+        if let Some(bn) = body_node(b) {
+            let ob = model.topology.pattern.offset(bn);
+            for k in 0..6 {
+                r[ob + k] += jf[6 * side + k] * tau;
             }
         }
     }
