@@ -738,3 +738,53 @@ def test_tendon_frictionloss_follows_mujoco():
     state, _ = ukemi.step(uk, uk.make_state(qpos=q0, qvel=[2.0, 0.0]))
     # (within the interior point's room `kappa_tol / (dt L̇)` of its bound)
     np.testing.assert_allclose(state.tendon_friction_impulse, [0.4 * 5e-4], rtol=1e-4)
+
+
+def test_include_splices_files_as_mujoco(tmp_path):
+    """`<include file>`: a scene that includes a robot from a subdirectory, which includes its
+    actuators (found beside it or beside the scene, as MuJoCo finds them), loads as MuJoCo loads
+    it and steps as the same model written in one file does. Messages name the file and line
+    an element came from; a model given as a string cannot include files."""
+    (tmp_path / "robot").mkdir()
+    (tmp_path / "robot" / "arm.xml").write_text("""<mujoco>
+  <worldbody>
+    <body name="arm" pos="0 0 1">
+      <joint name="hinge" type="hinge" axis="0 1 0" damping="0.1"/>
+      <geom name="link" type="capsule" fromto="0 0 0 0.3 0 0" size="0.05"/>
+    </body>
+  </worldbody>
+  <include file="motors.xml"/>
+</mujoco>""")
+    (tmp_path / "robot" / "motors.xml").write_text(
+        '<mujoco><actuator><motor joint="hinge" gear="2"/></actuator></mujoco>')
+    scene = tmp_path / "scene.xml"
+    scene.write_text("""<mujoco>
+  <option timestep="0.005"/>
+  <include file="robot/arm.xml"/>
+  <worldbody><geom name="floor" type="plane" size="5 5 .1"/></worldbody>
+</mujoco>""")
+    one_file = """<mujoco><option timestep="0.005"/><worldbody>
+    <body name="arm" pos="0 0 1"><joint name="hinge" type="hinge" axis="0 1 0" damping="0.1"/>
+      <geom name="link" type="capsule" fromto="0 0 0 0.3 0 0" size="0.05"/></body>
+    <geom name="floor" type="plane" size="5 5 .1"/></worldbody>
+  <actuator><motor joint="hinge" gear="2"/></actuator></mujoco>"""
+    ours, flat = ukemi.load(scene), ukemi.Model.from_xml_string(one_file)
+    mj = mujoco.MjModel.from_xml_path(str(scene))
+    assert (ours.nq, ours.nu, ours.ncontact) == (mj.nq, mj.nu, flat.ncontact) == (1, 1, flat.ncontact)
+    ctrls = np.full((200, 1), 0.3)
+    a = ukemi.rollout(ours, ours.make_state(), ctrls=ctrls)
+    b = ukemi.rollout(flat, flat.make_state(), ctrls=ctrls)
+    np.testing.assert_array_equal(a.qpos, b.qpos)
+    # a bad element in an included file is named there
+    (tmp_path / "robot" / "motors.xml").write_text(
+        '<mujoco>\n<actuator>\n<motor joint="elbow"/></actuator></mujoco>')
+    with pytest.raises(ukemi.MjcfError, match=r"motors\.xml:3: .*elbow"):
+        ukemi.load(scene)
+    (tmp_path / "robot" / "motors.xml").unlink()
+    with pytest.raises(ukemi.MjcfError, match=r"arm\.xml:8: <include>: cannot read"):
+        ukemi.load(scene)
+    with pytest.raises(ukemi.MjcfError, match="given as a string"):
+        ukemi.Model.from_xml_string(scene.read_text())
+    (tmp_path / "robot" / "motors.xml").write_text('<mujoco><include file="motors.xml"/></mujoco>')
+    with pytest.raises(ukemi.MjcfError, match="nested deeper"):
+        ukemi.load(scene)

@@ -45,6 +45,8 @@ pub(super) struct Tree {
     pub geoms: Vec<PlacedGeom>,
     /// Sites: (name, MJCF body, frame in that body).
     pub sites: Vec<(String, usize, Frame)>,
+    /// World geoms read so far (unnamed ones are numbered across every `<worldbody>`).
+    world_geoms: usize,
 }
 
 impl Tree {
@@ -56,9 +58,11 @@ impl Tree {
     }
 }
 
+/// The body tree of every `<worldbody>` (MuJoCo merges them: an included robot file and its
+/// scene each bring one).
 pub(super) fn read_worldbody<'a, 'i>(
     ctx: &mut Ctx<'a, 'i>,
-    world: Node<'a, 'i>,
+    worlds: &[Node<'a, 'i>],
     b: &mut ModelBuilder,
 ) -> Result<Tree> {
     let mut tree = Tree::default();
@@ -71,8 +75,11 @@ pub(super) fn read_worldbody<'a, 'i>(
     });
     tree.engine_bodies.push(("world".into(), Frame::identity()));
     tree.engine_parent.push(0);
-    let class = ctx.class_of(world, "main")?;
-    read_children(ctx, world, 0, &class, &mut tree, b).map(|_| tree)
+    for &world in worlds {
+        let class = ctx.class_of(world, "main")?;
+        read_children(ctx, world, 0, &class, &mut tree, b)?;
+    }
+    Ok(tree)
 }
 
 fn read_children<'a, 'i>(
@@ -83,7 +90,7 @@ fn read_children<'a, 'i>(
     tree: &mut Tree,
     b: &mut ModelBuilder,
 ) -> Result<()> {
-    let mut geom_index = 0;
+    let mut geom_index = if body == 0 { tree.world_geoms } else { 0 };
     for child in elements(node) {
         match child.tag_name().name() {
             "body" => read_body(ctx, child, body, class, tree, b)?,
@@ -108,6 +115,9 @@ fn read_children<'a, 'i>(
             }
             other => return Err(ctx.err(child, format!("unknown element <{other}> in a body"))),
         }
+    }
+    if body == 0 {
+        tree.world_geoms = geom_index;
     }
     Ok(())
 }

@@ -1,8 +1,9 @@
 //! MJCF loader: MuJoCo's XML model format → [`ModelBuilder`] → [`Model`] (no physics here).
 //!
-//! Supported: `compiler` (angle, eulerseq, inertiafromgeom, inertiagrouprange, autolimits,
+//! Supported: `include` (spliced in, paths beside the including file or the model file:
+//! [`include`]), `compiler` (angle, eulerseq, inertiafromgeom, inertiagrouprange, autolimits,
 //! settotalmass), `option` (timestep, gravity), nested `default` classes with `class` and
-//! `childclass`, the body tree with every orientation form, `inertial`, inertia from geoms
+//! `childclass`, the body tree (of every `worldbody`) with every orientation form, `inertial`, inertia from geoms
 //! (sphere, capsule, cylinder, box, ellipsoid), hinge/slide/ball/free joints (several joints of
 //! one body become one engine joint with MuJoCo's dofs in MuJoCo's order, each hinge about its
 //! own anchor), geoms with contact bit masks and `condim` 1 or 3, `contact/exclude` and
@@ -41,6 +42,7 @@ mod body;
 mod defaults;
 mod frame;
 mod geom;
+mod include;
 mod inertia;
 mod joint;
 mod parse;
@@ -72,7 +74,7 @@ pub fn load_path(path: &Path) -> Result<MjcfModel> {
         line: 0,
         msg: format!("cannot read the file: {e}"),
     })?;
-    load_str(&xml, &source)
+    load(&xml, &source, path.parent())
 }
 
 /// Load MJCF text; `source` names it in messages (a path or `<string>`).
@@ -84,6 +86,15 @@ pub fn load_path(path: &Path) -> Result<MjcfModel> {
 /// assert_eq!((m.nq, m.nv), (1, 1));
 /// ```
 pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
+    load(xml, source, None)
+}
+
+/// [`load_str`] with `<include>` paths relative to `dir` (none: a model given as a string may
+/// not include files).
+fn load(xml: &str, source: &str, dir: Option<&Path>) -> Result<MjcfModel> {
+    let mut spliced = include::splice(xml, source, dir)?;
+    let text = spliced.as_mut().map(|s| std::mem::take(&mut s.xml));
+    let xml = text.as_deref().unwrap_or(xml);
     let doc = Document::parse(xml).map_err(|e| Error::Mjcf {
         source_name: source.to_string(),
         line: e.pos().row as usize,
@@ -98,6 +109,7 @@ pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
         lines: Default::default(),
         mass_scale: 1.0,
         paired: Default::default(),
+        spliced,
     };
     let root = doc.root_element();
     if root.tag_name().name() != "mujoco" {
@@ -137,7 +149,6 @@ pub fn load_str(xml: &str, source: &str) -> Result<MjcfModel> {
             "equality" => actuator::read_equality(&mut ctx, node, &tree, &mut b)?,
             "contact" => actuator::read_contact(&mut ctx, node, &tree, &mut b)?,
             "sensor" => ctx.warn(node, "sensors are not loaded"),
-            "include" => return Err(ctx.unsupported(node, "<include> is not supported")),
             "deformable" | "extension" => {
                 return Err(ctx.unsupported(node, "element is not supported"));
             }
@@ -177,14 +188,13 @@ fn read_tree<'a, 'i>(
     root: Node<'a, 'i>,
     b: &mut ModelBuilder,
 ) -> Result<Tree> {
-    let mut worlds = elements(root).filter(|n| n.tag_name().name() == "worldbody");
-    let world = worlds
-        .next()
-        .ok_or_else(|| ctx.err(root, "no <worldbody>"))?;
-    if let Some(second) = worlds.next() {
-        return Err(ctx.err(second, "more than one <worldbody>"));
+    let worlds: Vec<_> = elements(root)
+        .filter(|n| n.tag_name().name() == "worldbody")
+        .collect();
+    if worlds.is_empty() {
+        return Err(ctx.err(root, "no <worldbody>"));
     }
-    body::read_worldbody(ctx, world, b)
+    body::read_worldbody(ctx, &worlds, b)
 }
 
 /// `compiler` and `default` (they shape how everything else is read).
@@ -364,7 +374,10 @@ fn exclude_pairs(ctx: &mut Ctx, tree: &Tree, b: &mut ModelBuilder) {
                 if entry.1.is_empty() {
                     entry.1 = format!(
                         "{:?} (line {}) and {:?} (line {})",
-                        ga.name, ga.def.line, gb.name, gb.def.line
+                        ga.name,
+                        ctx.origin(ga.def.line).1,
+                        gb.name,
+                        ctx.origin(gb.def.line).1
                     );
                 }
             }
@@ -388,11 +401,14 @@ fn locate(ctx: &Ctx, e: Error) -> Error {
     };
     let key = field.split('.').next().unwrap_or("");
     match ctx.lines.get(key) {
-        Some(&line) => Error::Mjcf {
-            source_name: ctx.source.clone(),
-            line,
-            msg,
-        },
+        Some(&line) => {
+            let (source_name, line) = ctx.origin(line);
+            Error::Mjcf {
+                source_name,
+                line,
+                msg,
+            }
+        }
         None => Error::Mjcf {
             source_name: ctx.source.clone(),
             line: 0,

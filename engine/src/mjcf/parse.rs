@@ -50,6 +50,8 @@ pub(super) struct Ctx<'a, 'input> {
     pub mass_scale: f64,
     /// Geoms named by a `<contact><pair>`: kept even when their bit masks make them visual.
     pub paired: std::collections::HashSet<String>,
+    /// Where each line came from when `<include>`s were spliced in (`None`: `source` alone).
+    pub spliced: Option<super::include::Spliced>,
 }
 
 /// Actuator element names share one default slot (as in MuJoCo).
@@ -66,21 +68,31 @@ impl<'a, 'input> Ctx<'a, 'input> {
         self.doc.text_pos_at(node.range().start).row as usize
     }
 
+    /// The file and line that line `row` of the model text came from.
+    pub fn origin(&self, row: usize) -> (String, usize) {
+        match &self.spliced {
+            Some(s) => s.origin(row),
+            None => (self.source.clone(), row),
+        }
+    }
+
     /// An [`Error::Mjcf`] at `node`.
     pub fn err(&self, node: Node, msg: impl Into<String>) -> Error {
+        let (source_name, line) = self.origin(self.line(node));
         Error::Mjcf {
-            source_name: self.source.clone(),
-            line: self.line(node),
+            source_name,
+            line,
             msg: format!("<{}>: {}", node.tag_name().name(), msg.into()),
         }
     }
 
     /// An [`Error::Unsupported`] naming the element and line.
     pub fn unsupported(&self, node: Node, msg: impl Into<String>) -> Error {
+        let (source, line) = self.origin(self.line(node));
         Error::Unsupported(format!(
             "MJCF {}:{}: <{}{}>: {}",
-            self.source,
-            self.line(node),
+            source,
+            line,
             node.tag_name().name(),
             node.attribute("name")
                 .map(|n| format!(" name=\"{n}\""))
@@ -91,10 +103,11 @@ impl<'a, 'input> Ctx<'a, 'input> {
 
     /// Record a warning (once per distinct text).
     pub fn warn(&mut self, node: Node, msg: impl Into<String>) {
+        let (source, line) = self.origin(self.line(node));
         let text = format!(
             "MJCF {}:{}: <{}>: {}",
-            self.source,
-            self.line(node),
+            source,
+            line,
             node.tag_name().name(),
             msg.into()
         );
