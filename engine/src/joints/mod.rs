@@ -125,7 +125,7 @@ pub struct Joint {
     pub armature: Vec<f64>,
     /// Dry friction per free dof (MuJoCo's `frictionloss`, N or N·m): the largest force the
     /// joint resists motion with, solved as a complementarity problem in the interior-point
-    /// solve ([`crate::solver::friction`]). Empty means none.
+    /// solve (`solver::friction`). Empty means none.
     pub frictionloss: Vec<f64>,
     /// Hinges about different anchors: `p_{i+1} - p_i` for consecutive hinges, joint frame (m);
     /// empty when all hinges share one anchor. The child anchor is then the last hinge's

@@ -45,6 +45,6 @@ pub struct PassiveTendon {
     /// Damping (N·s/m or N·m·s/rad per unit length), acting on the next velocities.
     pub damping: f64,
     /// Dry friction on the tendon's length (N or N·m per unit length, MuJoCo's
-    /// `frictionloss`), solved as the joints' is ([`crate::solver::friction`]).
+    /// `frictionloss`), solved as the joints' is (`solver::friction`).
     pub frictionloss: f64,
 }

@@ -77,7 +77,7 @@ pub(crate) struct Topology {
     /// Index of each winding hinge's turns in [`crate::State`]'s winding ([`Joint::winds`]).
     pub winding_adr: Vec<Option<usize>>,
     /// Node of each joint's dry-friction variables (4 per dof with `frictionloss`:
-    /// `[σ_fw, s_fw, σ_bw, s_bw]`, [`crate::solver::friction`]), numbered after every other
+    /// `[δ_fw, s_fw, δ_bw, s_bw]`, [`crate::solver::friction`]), numbered after every other
     /// node and eliminated first, as a leaf.
     pub friction_node: Vec<Option<usize>>,
     /// (node row, body col) and (body row, node col) blocks of each friction node for the

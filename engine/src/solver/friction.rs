@@ -1,9 +1,9 @@
-//! Dry joint friction (MuJoCo's `frictionloss`) in the interior-point step: the joint resists
-//! its motion with an impulse `τ`, `|τ| ≤ f h`, that dissipates the most, `τ θ̇⁺` largest
-//! (maximal dissipation along one dof: a one-dimensional friction cone with a fixed bound).
-//! Its optimality conditions split the dof's displacement over the step `h θ̇⁺ = h J_f w⁺` into
-//! a forward part `δ_fw` and a backward part `δ_bw`, each complementary to the room `s` left on
-//! its side of the bound:
+//! Dry joint friction (MuJoCo's `frictionloss`) in the interior-point step: the joint resists its
+//! motion with an impulse `τ`, `|τ| ≤ f h`, that dissipates the most, `τ θ̇⁺` largest (maximal
+//! dissipation along one dof: a one-dimensional friction cone with a fixed bound). Its optimality
+//! conditions split the dof's displacement over the step `h θ̇⁺ = h J_f w⁺` into a forward part
+//! `δ_fw` and a backward part `δ_bw`, each complementary to the room `s` left on its side of the
+//! bound:
 //!
 //! ```text
 //! node layout per dof with friction: [δ_fw, s_fw, δ_bw, s_bw]
