@@ -788,3 +788,42 @@ def test_include_splices_files_as_mujoco(tmp_path):
     (tmp_path / "robot" / "motors.xml").write_text('<mujoco><include file="motors.xml"/></mujoco>')
     with pytest.raises(ukemi.MjcfError, match="nested deeper"):
         ukemi.load(scene)
+
+
+def test_gravcomp_follows_mujoco():
+    """A body's `gravcomp`: a double pendulum whose links cancel 0.6 and 1.0 of their weight
+    swings as MuJoCo's on the same MJCF (gap 2.1e-3 -> 1.0e-3 as dt halves), and 3 rad from
+    the one without; a free body with gravcomp 1 floats, also built with `gravcomp=`."""
+    xml = """<mujoco><option timestep="{h}"/><worldbody>
+      <body name="a" pos="0 0 1" gravcomp="0.6"><joint name="j1" type="hinge" axis="0 1 0"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.04" contype="0" conaffinity="0"/>
+        <body name="b" pos="0.3 0 0" gravcomp="1"><joint name="j2" type="hinge" axis="0 1 0"/>
+          <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.04" contype="0" conaffinity="0"/>
+        </body></body>
+      <body name="float" pos="1 0 1" gravcomp="1"><freejoint/><geom size="0.1"/></body>
+      </worldbody></mujoco>"""
+    q0 = np.zeros(9)
+    q0[[2, 4, 5]] = 1.0, 1.0, 1.0  # the ball at (1, 0, 1), unturned
+    q0[0:2] = 0.4, -0.3
+    gaps = []
+    for h in (1e-3, 5e-4):
+        mj, traj, mq, _ = rollout_both(xml.format(h=h), q0.copy(), np.zeros(8),
+                                       np.zeros((round(1.0 / h), 0)))
+        gaps.append(np.abs(traj.qpos[1:, :2] - mq[:, :2]).max())
+        np.testing.assert_allclose(traj.qpos[:, 2:5], np.tile([1.0, 0, 1.0], (len(traj.qpos), 1)),
+                                   atol=1e-12)  # the floating ball stays put
+    uk = ukemi.Model.from_xml_string(xml.format(h=5e-4))
+    plain = ukemi.Model.from_xml_string(re.sub(r' gravcomp="[0-9.]+"', "", xml.format(h=5e-4)))
+    apart = np.abs(ukemi.rollout(plain, plain.make_state(qpos=q0), nsteps=2000).qpos[-1, :2]
+                   - traj.qpos[-1, :2]).max()
+    print(f"\ngravcomp: gaps {gaps}, without it {apart:.2f} rad away")
+    assert gaps[0] < 5e-3 and gaps[1] < 0.7 * gaps[0] and apart > 0.1, (gaps, apart)
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_body("ball", mass=1.0, inertia=(0.004, 0.004, 0.004), pos=(0, 0, 1), gravcomp=1.0)
+    b.add_joint("free", "free", "world", "ball")
+    m = b.compile()
+    tr = ukemi.rollout(m, m.make_state(), nsteps=50)
+    np.testing.assert_allclose(tr.qpos[-1, :3], [0, 0, 1], atol=1e-12)
+    with pytest.raises(ValueError, match="gravcomp"):
+        b.add_body("bad", mass=1.0, inertia=(1, 1, 1), gravcomp=float("nan"))
+        b.compile()

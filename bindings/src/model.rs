@@ -28,6 +28,8 @@ impl PyModelBuilder {
     }
 
     #[allow(clippy::too_many_arguments)]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (name, mass, inertia, pos, quat, com, gravcomp=0.0))]
     fn add_body(
         &mut self,
         name: String,
@@ -36,12 +38,14 @@ impl PyModelBuilder {
         pos: [f64; 3],
         quat: [f64; 4],
         com: [f64; 3],
+        gravcomp: f64,
     ) {
         let spec = BodySpec::new(&name, mass, [1.0; 3])
             .inertia_matrix(Matrix3::from_row_slice(&inertia))
             .pos(pos)
             .quat(quat)
-            .com(com);
+            .com(com)
+            .gravcomp(gravcomp);
         self.inner.add_body(spec);
     }
 

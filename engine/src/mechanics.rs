@@ -73,11 +73,17 @@ pub(crate) fn constraint_work(
     (t1 + a1 - t0 - a0 - work, t0 + t1 + a0 + a1)
 }
 
-/// Gravitational potential energy `-Σ m g·p` (J).
+/// Gravitational potential energy `-Σ m (1 - gravcomp) g·p` (J): a compensated share of a
+/// body's weight does no work.
 pub fn potential_energy(model: &Model, state: &State) -> f64 {
     (1..model.nbody())
-        .map(|b| -model.bodies[b].mass * model.options.gravity.dot(&state.pose(b).pos))
+        .map(|b| -weight_mass(model, b) * model.options.gravity.dot(&state.pose(b).pos))
         .sum()
+}
+
+/// The mass gravity pulls on body `b` net of its compensation.
+fn weight_mass(model: &Model, b: usize) -> f64 {
+    model.bodies[b].mass * (1.0 - model.bodies[b].gravcomp)
 }
 
 /// Discrete total energy of the step that led to `state`: midpoint kinetic energy plus the mean
@@ -91,7 +97,7 @@ pub fn total_energy(model: &Model, state: &State) -> f64 {
         .map(|b| {
             let p = state.pose(b).pos;
             let v = state.velocity(b).0;
-            -model.bodies[b].mass * g.dot(&(p - v * (0.5 * h)))
+            -weight_mass(model, b) * g.dot(&(p - v * (0.5 * h)))
         })
         .sum();
     kinetic_energy(model, state) + pe + spring_energy(model, state) + armature_energy(model, state)

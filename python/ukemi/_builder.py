@@ -67,7 +67,7 @@ class ModelBuilder:
         self._b = _ukemi._ModelBuilder(as_scalar("timestep", timestep), as_vector("gravity", gravity, 3))
 
     def add_body(self, name: str, mass: float, inertia, pos=(0.0, 0.0, 0.0), quat=(1.0, 0.0, 0.0, 0.0),
-                 com=(0.0, 0.0, 0.0)) -> None:
+                 com=(0.0, 0.0, 0.0), gravcomp: float = 0.0) -> None:
         """Add a rigid body.
 
         Args:
@@ -77,12 +77,15 @@ class ModelBuilder:
             pos: Body frame origin at the reference configuration, world (m).
             quat: Body orientation (w, x, y, z) at the reference configuration, unit norm.
             com: Centre of mass in the body frame (m).
+            gravcomp: Gravity compensation (MuJoCo's ``gravcomp``): the share of the body's
+                weight cancelled by an upward force at its COM (1 floats it).
 
         Raises:
             TypeError, ShapeError, InputError: malformed arguments (validated again at compile).
         """
         self._b.add_body(str(name), as_scalar("mass", mass), _inertia("inertia", inertia),
-                         as_vector("pos", pos, 3), as_vector("quat", quat, 4), as_vector("com", com, 3))
+                         as_vector("pos", pos, 3), as_vector("quat", quat, 4), as_vector("com", com, 3),
+                         as_scalar("gravcomp", gravcomp))
 
     def add_joint(self, name: str, kind: str, parent: str, child: str, axis=(0.0, 0.0, 1.0),
                   parent_anchor=(0.0, 0.0, 0.0), child_anchor=(0.0, 0.0, 0.0), stiffness=0.0,

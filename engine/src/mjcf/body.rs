@@ -299,12 +299,16 @@ fn add_engine_body<'a, 'i>(
             ),
         ));
     }
+    // MuJoCo's gravity compensation (a passive force: `actuatorgravcomp` would route it through
+    // the joints' actuator force limits, which ukemi does not model)
+    let gravcomp = ctx.num(node, "", "gravcomp", 0.0)?;
     b.add_body(
         BodySpec::new(name, *mass, [1.0; 3])
             .inertia_matrix(*inertia)
             .com((*com).into())
             .pos(world.pos.into())
-            .quat(world.wxyz()),
+            .quat(world.wxyz())
+            .gravcomp(gravcomp),
     );
     tree.engine_bodies.push((name.to_string(), *world));
     Ok(())

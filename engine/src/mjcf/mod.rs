@@ -3,7 +3,8 @@
 //! Supported: `include` (spliced in, paths beside the including file or the model file:
 //! [`include`]), `compiler` (angle, eulerseq, inertiafromgeom, inertiagrouprange, autolimits,
 //! settotalmass), `option` (timestep, gravity), nested `default` classes with `class` and
-//! `childclass`, the body tree (of every `worldbody`) with every orientation form, `inertial`,
+//! `childclass`, the body tree (of every `worldbody`; bodies' `gravcomp`) with every orientation
+//! form, `inertial`,
 //! inertia from geoms (sphere, capsule, cylinder, box, ellipsoid), hinge/slide/ball/free joints
 //! (several joints of one body become one engine joint with MuJoCo's dofs in MuJoCo's order, each
 //! hinge about its own anchor), geoms with contact bit masks and `condim` 1 or 3, `contact/exclude`

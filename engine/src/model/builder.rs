@@ -30,6 +30,9 @@ pub struct BodySpec {
     pub pos: Vector3<f64>,
     /// Body orientation `(w, x, y, z)`, unit.
     pub quat: [f64; 4],
+    /// Gravity compensation (MuJoCo's `gravcomp`): the share of the body's weight cancelled by
+    /// an upward force at its COM. Default 0.
+    pub gravcomp: f64,
 }
 
 impl BodySpec {
@@ -42,7 +45,14 @@ impl BodySpec {
             com: Vector3::zeros(),
             pos: Vector3::zeros(),
             quat: [1.0, 0.0, 0.0, 0.0],
+            gravcomp: 0.0,
         }
+    }
+    /// Gravity compensation: the share of the body's weight an upward force at its COM
+    /// cancels (MuJoCo's `gravcomp`; 1 floats the body).
+    pub fn gravcomp(mut self, share: f64) -> Self {
+        self.gravcomp = share;
+        self
     }
     /// Full 3×3 inertia about the COM, body frame.
     pub fn inertia_matrix(mut self, inertia: Matrix3<f64>) -> Self {
@@ -479,6 +489,7 @@ impl ModelBuilder {
             inertia: Matrix3::zeros(),
             com: Vector3::zeros(),
             ref_pose: Pose::world(),
+            gravcomp: 0.0,
         };
         let mut out = vec![world];
         for spec in &self.bodies {
@@ -503,6 +514,7 @@ impl ModelBuilder {
             check_finite(spec.pos.as_slice(), &f("pos"))?;
             check_finite(spec.com.as_slice(), &f("com"))?;
             check_unit_quat(&spec.quat, &f("quat"))?;
+            check_finite(&[spec.gravcomp], &f("gravcomp"))?;
             let q = quat::from_wxyz(&spec.quat);
             out.push(Body {
                 name: spec.name.clone(),
@@ -513,6 +525,7 @@ impl ModelBuilder {
                     pos: spec.pos + quat::rotation(&q) * spec.com,
                     quat: q,
                 },
+                gravcomp: spec.gravcomp,
             });
         }
         Ok(out)

@@ -35,6 +35,9 @@ pub struct Body {
     pub com: Vector3<f64>,
     /// COM pose at the reference configuration.
     pub ref_pose: Pose,
+    /// Gravity compensation (MuJoCo's `gravcomp`): an upward force `gravcomp · m g` at the COM
+    /// cancels that share of the body's weight (1: it floats).
+    pub gravcomp: f64,
 }
 
 /// An actuator: a scalar force `F = clamp(gain · clamp(ctrl) + bias₀ + bias₁ L + bias₂ L̇,

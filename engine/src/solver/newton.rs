@@ -102,7 +102,8 @@ pub(crate) fn prepare_smooth_forces(
                 ),
                 None => (Vector3::zeros(), Vector3::zeros()),
             };
-            let lin = (g * body.mass + f) * h;
+            // gravity less the compensated share (MuJoCo's `gravcomp`)
+            let lin = (g * (body.mass * (1.0 - body.gravcomp)) + f) * h;
             let rot_b = rot.transpose() * tau * h;
             a = [lin[0], lin[1], lin[2], rot_b[0], rot_b[1], rot_b[2]];
         }
