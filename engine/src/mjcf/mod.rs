@@ -4,18 +4,18 @@
 //! [`include`]), `compiler` (angle, eulerseq, inertiafromgeom, inertiagrouprange, autolimits,
 //! settotalmass), `option` (timestep, gravity), nested `default` classes with `class` and
 //! `childclass`, the body tree (of every `worldbody`; bodies' `gravcomp`) with every orientation
-//! form, `inertial`,
-//! inertia from geoms (sphere, capsule, cylinder, box, ellipsoid), hinge/slide/ball/free joints
-//! (several joints of one body become one engine joint with MuJoCo's dofs in MuJoCo's order, each
-//! hinge about its own anchor), geoms with contact bit masks and `condim` 1 or 3, `contact/exclude`
-//! and `contact/pair` (friction and condim from the pair or its class, as MuJoCo), `equality`
-//! connect/weld (loop joints) and joint (a polynomial coupling solved with the joints), fixed
-//! tendons as actuator transmissions, when limited as hard tendon limits (inequalities solved with
-//! the contacts) and with `stiffness`/`damping`/`springlength`/`frictionloss` as passive springs,
-//! implicit dampers and dry friction, `actuator` motor/position/velocity/general on joints, fixed
-//! tendons and sites (with `forcerange`, and a position servo's `dampratio` turned into its
-//! velocity gain at qpos0 and its `inheritrange` into its control range, as MuJoCo does), joint
-//! `frictionloss` (hard dry friction, `solver::friction`), and `keyframe`.
+//! form, `inertial`, inertia from geoms (sphere, capsule, cylinder, box, ellipsoid),
+//! hinge/slide/ball/free joints (several joints of one body become one engine joint with MuJoCo's
+//! dofs in MuJoCo's order, each hinge about its own anchor), geoms with contact bit masks and
+//! `condim` 1 or 3, `contact/exclude` and `contact/pair` (friction and condim from the pair or its
+//! class, as MuJoCo), `equality` connect/weld (loop joints) and joint (a polynomial coupling solved
+//! with the joints), fixed tendons as actuator transmissions, when limited as hard tendon limits
+//! (inequalities solved with the contacts) and with
+//! `stiffness`/`damping`/`springlength`/`frictionloss` as passive springs, implicit dampers and dry
+//! friction, `actuator` motor/position/velocity/general on joints, fixed tendons and sites (with
+//! `forcerange`, and a position servo's `dampratio` turned into its velocity gain at qpos0 and its
+//! `inheritrange` into its control range, as MuJoCo does), joint `frictionloss` (hard dry friction,
+//! `solver::friction`), and `keyframe`.
 //!
 //! Anything else is an [`Error::Unsupported`] or an [`Error::Mjcf`] naming the element and its
 //! line, or — where ignoring it only drops an effect ukemi does not model (solver settings,
