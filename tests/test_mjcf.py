@@ -827,3 +827,18 @@ def test_gravcomp_follows_mujoco():
     with pytest.raises(ValueError, match="gravcomp"):
         b.add_body("bad", mass=1.0, inertia=(1, 1, 1), gravcomp=float("nan"))
         b.compile()
+
+
+def test_joint_actuator_force_ranges_are_named_as_ignored():
+    """A joint's `actuatorfrcrange` (limited by `autolimits` or `actuatorfrclimited`) clamps
+    MuJoCo's total actuator force at the joint; ukemi clamps each actuator's `forcerange` only,
+    and says so with the line. An unlimited range is quiet, as it changes nothing."""
+    xml = """<mujoco>
+      <worldbody><body><joint name="j" type="hinge" {attrs}/><geom size="0.1"/></body></worldbody>
+      <actuator><motor joint="j"/></actuator></mujoco>"""
+    with pytest.warns(UserWarning, match=r"<string>:2: <joint>: `actuatorfrcrange` is ignored"):
+        ukemi.Model.from_xml_string(xml.format(attrs='actuatorfrcrange="-1 1"'))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ukemi.Model.from_xml_string(
+            xml.format(attrs='actuatorfrcrange="-1 1" actuatorfrclimited="false"'))

@@ -130,6 +130,17 @@ pub(super) fn parse_joint<'a, 'i>(
             return Err(ctx.err(node, format!("attribute `{what}` = {v}: must be >= 0")));
         }
     }
+    // MuJoCo clamps a joint's total actuator force to `actuatorfrcrange` (limited explicitly or
+    // by `autolimits`); ukemi clamps each actuator's own `forcerange` only
+    let frc_range = ctx.nums(node, class, "actuatorfrcrange", 2)?;
+    let frc_limited = ctx.tristate(node, class, "actuatorfrclimited")?;
+    if frc_limited.unwrap_or(ctx.compiler.autolimits && frc_range.is_some()) {
+        ctx.warn(
+            node,
+            "`actuatorfrcrange` is ignored: the joint's total actuator force is not clamped \
+             (each actuator's own `forcerange` is)",
+        );
+    }
     Ok(def)
 }
 

@@ -32,6 +32,8 @@
 //!   each is reported as a warning.
 //! * Servos' position terms act at the current configuration (explicit), like springs; their
 //!   velocity gains at the next velocity (implicit, as in MuJoCo's `implicitfast`).
+//! * A joint's `actuatorfrcrange` (MuJoCo's clamp of its total actuator force) is ignored with a
+//!   warning; each actuator's own `forcerange` is applied.
 //! * Joint `frictionloss` is hard dry friction: a joint held below its friction moves only by the
 //!   solver's complementarity tolerance (MuJoCo's is soft and creeps: `solreffriction`,
 //!   `solimpfriction`, ignored here).
