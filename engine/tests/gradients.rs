@@ -1316,3 +1316,87 @@ fn gravcomp_jacobians_match_the_step() {
     let e = check(&m, &s, &[], Coordinates::Minimal, None, 1e-6);
     eprintln!("gravcomp: max rel err {e:e}");
 }
+
+/// The parameter columns of joint armature and dry friction, of a passive tendon's spring,
+/// damper and dry friction and of the actuators' gears, gains and biases (system
+/// identification's usual unknowns) match finite differences of the step, sliding and
+/// sticking; armature, tendon damping and a tendon servo's velocity gain set from zero through
+/// `with_params` give the step of the model compiled with them, bit for bit.
+#[test]
+fn armature_friction_and_tendon_parameter_columns_match_the_step() {
+    use ukemi_engine::model::PassiveTendonSpec;
+    let build = |armature: f64, tendon_damping: f64, servo_kv: f64| {
+        let mut b = motor_chain(|i, mut j| {
+            if i == 1 {
+                j.armature = vec![armature];
+            }
+            if i == 2 {
+                // (j0's armature stays at zero, its bound: a one-sided difference, which on
+                // the light last link is off by 3e-5; here a central one)
+                j.armature = vec![1e-3];
+            }
+            j.damping(0.1).frictionloss(0.4 + 0.3 * i as f64)
+        });
+        b.add_passive_tendon(PassiveTendonSpec {
+            name: "t".into(),
+            terms: vec![("j0".into(), 0, 1.0), ("j2".into(), 0, -0.5)],
+            stiffness: 4.0,
+            springlength: Some(0.1),
+            damping: tendon_damping,
+            frictionloss: 0.3,
+        });
+        // a position servo on a fixed tendon `L = q₁ + q₂` (kp 2, kv `servo_kv`)
+        let mut servo = ActuatorSpec::motor("servo", "j1", 0, 1.2);
+        servo.transmission = ukemi_engine::model::TransmissionSpec::Tendon(vec![
+            ("j1".into(), 0, 1.0),
+            ("j2".into(), 0, 1.0),
+        ]);
+        (servo.gain, servo.bias) = (2.0, [0.1, -2.0, -servo_kv]);
+        b = b.actuator(servo);
+        tight(b.compile().unwrap())
+    };
+    let m = build(0.05, 0.7, 0.4);
+    let names = m.param_names();
+    for n in [
+        "joint_armature[j1][0]",
+        "joint_armature[j0][0]",
+        "joint_frictionloss[j2][0]",
+        "tendon_stiffness[t]",
+        "tendon_damping[t]",
+        "tendon_frictionloss[t]",
+        "actuator_gear[m0]",
+        "actuator_gain[servo]",
+        "actuator_bias[servo][2]",
+    ] {
+        assert!(names.iter().any(|x| x == n), "{n} not in {names:?}");
+    }
+    let ctrl = [0.5, 0.2, -0.3, 0.4];
+    for qvel in [[2.0, 0.0, -1.5], [0.0, 0.0, 0.0]] {
+        let s = moving_state(&m, &[0.3, -0.2, 0.1], &qvel);
+        let e = check(&m, &s, &ctrl, Coordinates::Minimal, None, 1e-6);
+        eprintln!("qvel {qvel:?}: max rel err {e:e}");
+        check(&m, &s, &ctrl, Coordinates::Maximal, None, 1e-6);
+        check(&m, &s, &ctrl, Coordinates::Minimal, Some(1e-4), 1e-5);
+        coloured_vs_reference(&m, &s, &ctrl, Coordinates::Minimal, None);
+    }
+    // from zero: the same step as the model compiled with the values
+    let zero = build(0.0, 0.0, 0.0);
+    let mut p = zero.params();
+    let at = |n: &str| names.iter().position(|x| x == n).unwrap();
+    p[at("joint_armature[j1][0]")] = 0.05;
+    p[at("tendon_damping[t]")] = 0.7;
+    p[at("actuator_bias[servo][2]")] = -0.4;
+    let set = zero.with_params(&p).unwrap();
+    assert_eq!(set.params(), m.params());
+    let s = moving_state(&m, &[0.3, -0.2, 0.1], &[2.0, 0.0, -1.5]);
+    let (mut a, mut b) = (s.clone(), s.moved_to(&set));
+    let ra = step(&m, &mut a, &mut Workspace::new(&m), &ctrl).unwrap();
+    let rb = step(&set, &mut b, &mut Workspace::new(&set), &ctrl).unwrap();
+    assert_eq!(ukemi_engine::qvel(&m, &a), ukemi_engine::qvel(&set, &b));
+    assert_eq!(ra.iterations, rb.iterations);
+    // a dry friction compiled in stays in: zero is refused with the parameter's name
+    let mut p = m.params();
+    p[at("joint_frictionloss[j0][0]")] = 0.0;
+    let err = m.with_params(&p).unwrap_err().to_string();
+    assert!(err.contains("joint_frictionloss[j0][0]"), "{err}");
+}

@@ -227,9 +227,26 @@ fn supports(
                 Param::Friction(g) | Param::Size(g, _) | Param::GeomPos(g, _) => {
                     Support::new(model, graph, &[], &[], &graph.geom_contacts[g], &[])
                 }
-                Param::Stiffness(j, _) | Param::Damping(j, _) => {
+                Param::Stiffness(j, _)
+                | Param::Damping(j, _)
+                | Param::Armature(j, _)
+                | Param::FrictionLoss(j, _) => {
                     let joint = &model.joints[j];
                     let bodies = [joint.parent, joint.child];
+                    Support::new(model, graph, &bodies, &[], &[], &bodies)
+                }
+                Param::TendonStiffness(k) | Param::TendonDamping(k) | Param::TendonFriction(k) => {
+                    // (every term's force acts on its joint's bodies)
+                    let joints = model.passive_tendons[k].terms.iter().map(|t| t.0);
+                    let mut bodies: Vec<usize> = joints
+                        .flat_map(|j| [model.joints[j].parent, model.joints[j].child])
+                        .collect();
+                    bodies.sort_unstable();
+                    bodies.dedup();
+                    Support::new(model, graph, &bodies, &[], &[], &bodies)
+                }
+                Param::ActuatorGear(a) | Param::ActuatorGain(a) | Param::ActuatorBias(a, _) => {
+                    let bodies = transmission_bodies(model, &model.actuators[a].transmission);
                     Support::new(model, graph, &bodies, &[], &[], &bodies)
                 }
                 Param::Gravity(_) => {

@@ -167,13 +167,15 @@ impl Joint {
             && !self.is_loop
             && !self.limits.iter().any(|&(dof, _, _)| dof == self.ntrans)
     }
-    /// The free dofs with dry friction, with their `frictionloss`.
+    /// The free dofs with dry friction, with their `frictionloss` (`!= 0`: a compiled
+    /// friction is > 0, and the partials' differences may take it below zero without
+    /// changing which dofs have a friction node).
     pub fn friction_dofs(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         self.frictionloss
             .iter()
             .copied()
             .enumerate()
-            .filter(|&(_, f)| f > 0.0)
+            .filter(|&(_, f)| f != 0.0)
     }
     /// Number of free dofs with dry friction.
     pub fn nfriction(&self) -> usize {

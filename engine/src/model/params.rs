@@ -2,11 +2,17 @@
 //!
 //! The vector lists, in this order: body masses and inertias (6 unique entries of each moving
 //! body's COM inertia, body frame: xx yy zz xy xz yz), geom friction, geom sizes and offsets,
-//! joint spring stiffness and damping per free dof, gravity, and the time step. Names follow
+//! joint spring stiffness, damping and armature per free dof, joint dry friction
+//! (`frictionloss`) per dof compiled with it, passive tendons' stiffness, damping and dry
+//! friction (the last for tendons compiled with it), actuators' gear, gain and bias (constant,
+//! per length, per rate: MuJoCo's `gear`, `gainprm[0]`, `biasprm[0..3]`; a site actuator's
+//! constant only), gravity, and the time step. Names follow
 //! `group[element]` or `group[element][component]`, e.g. `body_mass[torso]`,
-//! `geom_size[ball][0]`, `joint_damping[hip][1]`, `gravity[z]`. Setting the vector never
-//! changes the topology (contact candidates, graph), so states stay valid for the new model.
-use super::Model;
+//! `geom_size[ball][0]`, `joint_damping[hip][1]`, `joint_frictionloss[knee][0]`,
+//! `tendon_stiffness[split]`, `gravity[z]`. Setting the vector never changes the topology
+//! (contact candidates, graph, the dry-friction nodes), so states stay valid for the new model:
+//! a dry friction compiled in stays > 0 (a model without it is compiled without its node).
+use super::{Model, Transmission};
 use crate::contact::geometry::Shape;
 use crate::{Error, Result, ensure};
 
@@ -30,6 +36,18 @@ pub(crate) enum Param {
     GeomPos(usize, usize),
     Stiffness(usize, usize),
     Damping(usize, usize),
+    Armature(usize, usize),
+    /// (joint, free dof) of a dof compiled with dry friction
+    FrictionLoss(usize, usize),
+    TendonStiffness(usize),
+    TendonDamping(usize),
+    /// a passive tendon compiled with dry friction
+    TendonFriction(usize),
+    ActuatorGear(usize),
+    ActuatorGain(usize),
+    /// (actuator, k): bias term k (constant, per length, per rate; the last two not for site
+    /// transmissions, whose servo biases the loaders reject)
+    ActuatorBias(usize, usize),
     Gravity(usize),
     Timestep,
 }
@@ -94,6 +112,32 @@ impl Model {
         for (j, joint) in self.joints.iter().enumerate() {
             p.extend((0..joint.nfree()).map(|d| Param::Damping(j, d)));
         }
+        for (j, joint) in self.joints.iter().enumerate() {
+            p.extend((0..joint.nfree()).map(|d| Param::Armature(j, d)));
+        }
+        for (j, joint) in self.joints.iter().enumerate() {
+            p.extend(
+                joint
+                    .friction_dofs()
+                    .map(|(d, _)| Param::FrictionLoss(j, d)),
+            );
+        }
+        let tendons = 0..self.passive_tendons.len();
+        p.extend(tendons.clone().map(Param::TendonStiffness));
+        p.extend(tendons.clone().map(Param::TendonDamping));
+        p.extend(
+            tendons
+                .filter(|&k| self.passive_tendons[k].frictionloss > 0.0)
+                .map(Param::TendonFriction),
+        );
+        let actuators = 0..self.actuators.len();
+        p.extend(actuators.clone().map(Param::ActuatorGear));
+        p.extend(actuators.clone().map(Param::ActuatorGain));
+        for a in actuators {
+            let site = matches!(self.actuators[a].transmission, Transmission::Site { .. });
+            let n = if site { 1 } else { 3 };
+            p.extend((0..n).map(|k| Param::ActuatorBias(a, k)));
+        }
         p.extend((0..3).map(Param::Gravity));
         p.push(Param::Timestep);
         p
@@ -117,6 +161,24 @@ impl Model {
                 Param::GeomPos(g, i) => format!("geom_pos[{}][{}]", self.geoms[g].name, AXES[i]),
                 Param::Stiffness(j, d) => format!("joint_stiffness[{}][{d}]", self.joints[j].name),
                 Param::Damping(j, d) => format!("joint_damping[{}][{d}]", self.joints[j].name),
+                Param::Armature(j, d) => format!("joint_armature[{}][{d}]", self.joints[j].name),
+                Param::FrictionLoss(j, d) => {
+                    format!("joint_frictionloss[{}][{d}]", self.joints[j].name)
+                }
+                Param::TendonStiffness(k) => {
+                    format!("tendon_stiffness[{}]", self.passive_tendons[k].name)
+                }
+                Param::TendonDamping(k) => {
+                    format!("tendon_damping[{}]", self.passive_tendons[k].name)
+                }
+                Param::TendonFriction(k) => {
+                    format!("tendon_frictionloss[{}]", self.passive_tendons[k].name)
+                }
+                Param::ActuatorGear(a) => format!("actuator_gear[{}]", self.actuators[a].name),
+                Param::ActuatorGain(a) => format!("actuator_gain[{}]", self.actuators[a].name),
+                Param::ActuatorBias(a, k) => {
+                    format!("actuator_bias[{}][{k}]", self.actuators[a].name)
+                }
                 Param::Gravity(i) => format!("gravity[{}]", AXES[i]),
                 Param::Timestep => "timestep".to_string(),
             })
@@ -140,6 +202,14 @@ impl Model {
             Param::GeomPos(g, i) => self.geoms[g].pos[i],
             Param::Stiffness(j, d) => self.joints[j].stiffness[d],
             Param::Damping(j, d) => self.joints[j].damping[d],
+            Param::Armature(j, d) => self.joints[j].armature.get(d).copied().unwrap_or(0.0),
+            Param::FrictionLoss(j, d) => self.joints[j].frictionloss[d],
+            Param::TendonStiffness(k) => self.passive_tendons[k].stiffness,
+            Param::TendonDamping(k) => self.passive_tendons[k].damping,
+            Param::TendonFriction(k) => self.passive_tendons[k].frictionloss,
+            Param::ActuatorGear(a) => self.actuators[a].gear,
+            Param::ActuatorGain(a) => self.actuators[a].gain,
+            Param::ActuatorBias(a, k) => self.actuators[a].bias[k],
             Param::Gravity(i) => self.options.gravity[i],
             Param::Timestep => self.options.timestep,
         }
@@ -170,6 +240,20 @@ impl Model {
             Param::GeomPos(g, i) => self.geoms[g].pos[i] = v,
             Param::Stiffness(j, d) => self.joints[j].stiffness[d] = v,
             Param::Damping(j, d) => self.joints[j].damping[d] = v,
+            Param::Armature(j, d) => {
+                // (empty means none: filled with zeros on the first value set)
+                let joint = &mut self.joints[j];
+                let n = joint.nfree();
+                joint.armature.resize(n, 0.0);
+                joint.armature[d] = v;
+            }
+            Param::FrictionLoss(j, d) => self.joints[j].frictionloss[d] = v,
+            Param::TendonStiffness(k) => self.passive_tendons[k].stiffness = v,
+            Param::TendonDamping(k) => self.passive_tendons[k].damping = v,
+            Param::TendonFriction(k) => self.passive_tendons[k].frictionloss = v,
+            Param::ActuatorGear(a) => self.actuators[a].gear = v,
+            Param::ActuatorGain(a) => self.actuators[a].gain = v,
+            Param::ActuatorBias(a, k) => self.actuators[a].bias[k] = v,
             Param::Gravity(i) => self.options.gravity[i] = v,
             Param::Timestep => self.options.timestep = v,
         }
@@ -190,10 +274,23 @@ impl Model {
                 v.is_finite(),
                 Error::input(format!("params[{i}] ({})", names[i]), v, "must be finite")
             );
-            let positive = matches!(p, Param::Mass(_) | Param::Size(..) | Param::Timestep);
+            // (a dry friction compiled in has its node in the topology: it stays > 0)
+            let positive = matches!(
+                p,
+                Param::Mass(_)
+                    | Param::Size(..)
+                    | Param::Timestep
+                    | Param::FrictionLoss(..)
+                    | Param::TendonFriction(_)
+            );
             let nonneg = matches!(
                 p,
-                Param::Friction(_) | Param::Stiffness(..) | Param::Damping(..)
+                Param::Friction(_)
+                    | Param::Stiffness(..)
+                    | Param::Damping(..)
+                    | Param::Armature(..)
+                    | Param::TendonStiffness(_)
+                    | Param::TendonDamping(_)
             );
             ensure!(
                 !(positive && v <= 0.0 || nonneg && v < 0.0),
@@ -250,6 +347,9 @@ mod tests {
         assert_eq!(p[at("body_inertia[ball][yy]")], 0.2);
         assert_eq!(p[at("geom_size[ball][0]")], 0.1);
         assert_eq!(p[at("joint_damping[free][5]")], 0.1);
+        // armature for every free dof (none compiled: zero); no dry friction compiled, none
+        assert_eq!(p[at("joint_armature[free][2]")], 0.0);
+        assert!(!names.iter().any(|n| n.starts_with("joint_frictionloss")));
         assert_eq!(p[at("gravity[z]")], -9.81);
         let mut q = p.clone();
         q[at("geom_friction[ball]")] = 0.9;

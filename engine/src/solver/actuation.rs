@@ -107,21 +107,21 @@ pub(crate) fn split_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> 
     }
 }
 
-/// The joints of each implicit tendon damper: every fixed-tendon actuator with a velocity gain
-/// (`bias₂ ≠ 0`, [`split_force`]) and every passive tendon with damping. The body pairs its
-/// damping couples need blocks in the Newton matrix.
+/// The joints of each implicit tendon damper: every fixed-tendon actuator, with a velocity gain
+/// (`bias₂ ≠ 0`, [`split_force`]) or not, and every passive tendon, damped or not: its damping is a
+/// parameter (`Model::with_params`) that may be set from zero. The body pairs its damping
+/// couples need blocks in the Newton matrix (an undamped tendon's stay zero and are skipped).
 pub(crate) fn damped_tendons(
     actuators: &[Actuator],
     passive: &[crate::joints::tendon::PassiveTendon],
 ) -> Vec<Vec<usize>> {
-    let servos = actuators
+    // (every tendon actuator: its velocity gain is a parameter that may be set from zero)
+    let servos = actuators.iter().filter_map(|a| match &a.transmission {
+        Transmission::Tendon(terms) => Some(terms.iter().map(|t| t.0).collect()),
+        _ => None,
+    });
+    let dampers = passive
         .iter()
-        .filter(|a| a.bias[2] != 0.0)
-        .filter_map(|a| match &a.transmission {
-            Transmission::Tendon(terms) => Some(terms.iter().map(|t| t.0).collect()),
-            _ => None,
-        });
-    let dampers = (passive.iter().filter(|t| t.damping > 0.0))
         .map(|t| t.terms.iter().map(|&(j, _, _)| j).collect());
     servos.chain(dampers).collect()
 }

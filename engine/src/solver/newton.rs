@@ -588,7 +588,9 @@ fn tendon_dampers<'m>(
     (0..model.actuators.len())
         .filter_map(move |a| tendon_servo(model, damping, a))
         .chain(
-            (model.passive_tendons.iter().filter(|t| t.damping > 0.0))
+            // (`!= 0`: the partials difference a damping of zero centrally, its negative side
+            // included, or its column comes out halved)
+            (model.passive_tendons.iter().filter(|t| t.damping != 0.0))
                 .map(|t| (t.terms.as_slice(), t.damping)),
         )
 }

@@ -74,10 +74,20 @@ pub fn fd_jacobians(
         pp[i] += e;
         pm[i] -= e;
         let mp = model.with_params(&pp).unwrap();
-        // parameters at a bound (zero damping) get a one-sided difference
+        // parameters at a bound (zero damping or armature) get a one-sided difference of
+        // second order, (-3 f(0) + 4 f(e) - f(2e)) / 2e (the first-order one was off by 2e-5
+        // for the armature of a light link)
         let col = match model.with_params(&pm) {
             Ok(mm) => (out(&mp, &base_in, ctrl) - out(&mm, &base_in, ctrl)) / (2.0 * e),
-            Err(_) => (out(&mp, &base_in, ctrl) - out(model, &base_in, ctrl)) / e,
+            Err(_) => {
+                let mut p2 = p0.clone();
+                p2[i] += 2.0 * e;
+                let m2 = model.with_params(&p2).unwrap();
+                (out(&mp, &base_in, ctrl) * 4.0
+                    - out(model, &base_in, ctrl) * 3.0
+                    - out(&m2, &base_in, ctrl))
+                    / (2.0 * e)
+            }
         };
         c.set_column(i, &col);
     }
