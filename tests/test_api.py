@@ -400,15 +400,19 @@ def test_builder_servos_are_mujocos_position_and_velocity_actuators():
         return b.compile()
 
     xml = """<mujoco><option timestep="0.01"/><worldbody><body name="bob" pos="0 0 -1">
-      <joint name="hinge" type="hinge" axis="0 1 0" pos="0 0 1"/>
+      <joint name="hinge" type="hinge" axis="0 1 0" pos="0 0 1" {}/>
       <inertial pos="0 0 0" mass="1" diaginertia="1e-3 1e-3 1e-3"/></body></worldbody>
       <actuator>{}</actuator></mujoco>"""
-    cases = [(dict(kp=300.0, kv=500.0, forcerange=(-200.0, 200.0)),
+    cases = [(dict(kp=300.0, kv=500.0, forcerange=(-200.0, 200.0)), "",
               '<position joint="hinge" kp="300" kv="500" forcelimited="true" forcerange="-200 200"/>'),
-             (dict(kv=50.0), '<velocity joint="hinge" kv="50"/>')]
-    for servo, act in cases:
-        ours, from_xml = built(**servo), ukemi.Model.from_xml_string(xml.format(act))
-        mj = mujoco.MjModel.from_xml_string(xml.format(act))
+             # the joint's clamp of gear · F (gear 2: F within ±30)
+             (dict(kp=300.0, kv=500.0, gear=2.0, actuatorfrcrange=(-60.0, 60.0)),
+              'actuatorfrcrange="-60 60"', '<position joint="hinge" kp="300" kv="500" gear="2"/>'),
+             (dict(kv=50.0), "", '<velocity joint="hinge" kv="50"/>')]
+    for servo, joint, act in cases:
+        ours = built(**servo)
+        from_xml = ukemi.Model.from_xml_string(xml.format(joint, act))
+        mj = mujoco.MjModel.from_xml_string(xml.format(joint, act))
         mj.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         ctrls = [np.array([0.8])] * 200
         a, d, worst = beside_mujoco(ours, ours.make_state(), mj, ctrls)
@@ -421,6 +425,8 @@ def test_builder_servos_are_mujocos_position_and_velocity_actuators():
         built(kp=-1.0)
     with pytest.raises(ValueError, match="forcerange"):
         built(kp=1.0, forcerange=(2.0, 1.0))
+    with pytest.raises(ValueError, match="joint_forcerange"):
+        built(kp=1.0, actuatorfrcrange=(2.0, 1.0))
 
 
 def test_builder_frictionloss_is_mujocos_dry_joint_friction():

@@ -829,16 +829,68 @@ def test_gravcomp_follows_mujoco():
         b.compile()
 
 
-def test_joint_actuator_force_ranges_are_named_as_ignored():
-    """A joint's `actuatorfrcrange` (limited by `autolimits` or `actuatorfrclimited`) clamps
-    MuJoCo's total actuator force at the joint; ukemi clamps each actuator's `forcerange` only,
-    and says so with the line. An unlimited range is quiet, as it changes nothing."""
-    xml = """<mujoco>
-      <worldbody><body><joint name="j" type="hinge" {attrs}/><geom size="0.1"/></body></worldbody>
-      <actuator><motor joint="j"/></actuator></mujoco>"""
+FORCE_LIMITED_ARM = """<mujoco><option timestep="{h}" integrator="{integrator}"/><worldbody>
+  <body pos="0 0 1"><joint name="j" type="hinge" axis="0 1 0" damping="0.1" {limit}/>
+  <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.05" contype="0" conaffinity="0"/>
+  </body></worldbody><actuator>{actuators}</actuator></mujoco>"""
+
+
+@pytest.mark.filterwarnings("ignore:.*integrator")
+@pytest.mark.parametrize("servo", [False, True], ids=["motor", "position_servo"])
+def test_joint_actuatorfrcrange_clamps_as_mujoco(servo):
+    """A joint's `actuatorfrcrange` clamps the total actuator force on it (after the actuator's
+    own `forcerange`). Driven by one motor (gear 2) or one position servo (kp 20, kv 2, its
+    velocity gain implicit as in `implicitfast`), ukemi follows MuJoCo with the clamp to 1e-4
+    rad over 0.5 s, while the same run without the clamp is 10x farther away."""
+    h = 1e-3
+    act = ('<position joint="j" kp="20" kv="2" ctrlrange="-2 2"/>' if servo
+           else '<motor joint="j" gear="2" ctrlrange="-3 3"/>')
+    limit = 'actuatorfrcrange="-1.2 1.5"'
+    xml = FORCE_LIMITED_ARM.format(h=h, integrator="implicitfast", limit=limit, actuators=act)
+    free = FORCE_LIMITED_ARM.format(h=h, integrator="implicitfast", limit="", actuators=act)
+    rng = np.random.default_rng(2)
+    ctrls = np.repeat(rng.uniform(-2, 2, (5, 1)), 100, axis=0)
+    mj, traj, mq, _ = rollout_both(xml, [0.3], [0.0], ctrls)
+    gap = np.abs(traj.qpos[1:, 0] - mq[:, 0]).max()
+    # the clamp binds: MuJoCo's own actuator forces reach the range
+    d = mujoco.MjData(mj)
+    forces = []
+    for u in ctrls:
+        d.ctrl[:] = u
+        mujoco.mj_step(mj, d)
+        forces.append(d.qfrc_actuator[0])
+    assert np.isclose(min(forces), -1.2) and np.isclose(max(forces), 1.5), (min(forces),
+                                                                           max(forces))
+    _, unclamped, _, _ = rollout_both(free, [0.3], [0.0], ctrls)
+    off = np.abs(unclamped.qpos[1:, 0] - mq[:, 0]).max()
+    print(f"\n{'servo' if servo else 'motor'}: clamped |q - q_mujoco| {gap:.1e} rad, "
+          f"without the clamp {off:.1e}")
+    assert gap < 1e-4 and off > 10 * gap, (gap, off)
+
+
+@pytest.mark.filterwarnings("ignore:.*integrator")
+def test_joint_actuatorfrcrange_with_two_actuators_is_named_as_ignored():
+    """The clamp of a sum of actuator forces is not modelled: with two motors on one joint the
+    range is ignored with a warning naming it and its line; the motors' own ranges still act.
+    One motor's range loads quietly, and so does an unlimited range."""
+    one = FORCE_LIMITED_ARM.format(h=0.01, integrator="Euler", limit='actuatorfrcrange="-1 1"',
+                                   actuators='<motor joint="j"/>')
+    unlimited = one.replace('"-1 1"', '"-1 1" actuatorfrclimited="false"')
+    for xml in (one, unlimited):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            warnings.filterwarnings("ignore", message=".*integrator")
+            m = ukemi.Model.from_xml_string(xml)
+        # one motor at control 3: clamped to 1 N·m, or not
+        v = ukemi.step(m, m.make_state(), [3.0])[0].qvel
+        ref = ukemi.step(m, m.make_state(), [1.0 if xml is one else 3.0])[0].qvel
+        np.testing.assert_array_equal(v, ref)
+    xml = FORCE_LIMITED_ARM.format(
+        h=0.01, integrator="Euler", limit='actuatorfrcrange="-1 1"',
+        actuators='<motor joint="j"/><motor joint="j" forcerange="-0.5 0.5"/>')
     with pytest.warns(UserWarning, match=r"<string>:2: <joint>: `actuatorfrcrange` is ignored"):
-        ukemi.Model.from_xml_string(xml.format(attrs='actuatorfrcrange="-1 1"'))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        ukemi.Model.from_xml_string(
-            xml.format(attrs='actuatorfrcrange="-1 1" actuatorfrclimited="false"'))
+        m = ukemi.Model.from_xml_string(xml)
+    s = m.make_state()
+    n, _ = ukemi.step(m, s, [0.0, 3.0])
+    ref = ukemi.step(m, s, [0.0, 0.5])[0]
+    np.testing.assert_array_equal(n.qvel, ref.qvel)

@@ -84,7 +84,7 @@ impl PyModelBuilder {
     }
 
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (name, joint, dof, gear, ctrlrange, kp=0.0, kv=0.0, forcerange=None))]
+    #[pyo3(signature = (name, joint, dof, gear, ctrlrange, kp=0.0, kv=0.0, forcerange=None, actuatorfrcrange=None))]
     fn add_actuator(
         &mut self,
         name: String,
@@ -95,10 +95,12 @@ impl PyModelBuilder {
         kp: f64,
         kv: f64,
         forcerange: Option<(f64, f64)>,
+        actuatorfrcrange: Option<(f64, f64)>,
     ) {
         let mut spec = ActuatorSpec::motor(&name, &joint, dof, gear);
         spec.ctrlrange = ctrlrange;
         spec.forcerange = forcerange;
+        spec.joint_forcerange = actuatorfrcrange;
         // MuJoCo's shortcuts: a position servo `kp (u - L) - kv L̇`, a velocity servo
         // `kv (u - L̇)`, with `L = gear q`
         if kp != 0.0 {

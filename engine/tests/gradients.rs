@@ -1400,3 +1400,34 @@ fn armature_friction_and_tendon_parameter_columns_match_the_step() {
     let err = m.with_params(&p).unwrap_err().to_string();
     assert!(err.contains("joint_frictionloss[j0][0]"), "{err}");
 }
+
+/// A joint actuator force range (MuJoCo's `actuatorfrcrange`) on a motor and on a position
+/// servo: the Jacobians match finite differences of the step where the clamps bind (the
+/// clamped actuator's control column vanishes) and where they do not.
+#[test]
+fn joint_force_range_jacobians_match_the_step() {
+    let mut b = motor_chain(|_, j| j.damping(0.1));
+    let mut servo = ActuatorSpec::motor("servo", "j2", 0, 2.0);
+    (servo.gain, servo.bias) = (20.0, [0.0, -20.0, -2.0]);
+    servo.joint_forcerange = Some((-1.5, 1.2));
+    b = b.actuator(servo);
+    let m = b.compile().unwrap();
+    let mut m = tight(m);
+    m.actuators[0].joint_forcerange = Some((-0.4, 0.6));
+    let s = moving_state(&m, &[0.3, -0.2, 0.1], &[1.0, 0.5, -1.5]);
+    let lin = |ctrl: &[f64]| {
+        let mut l = Linearization::new(&m, &s, ctrl, Coordinates::Minimal, Wrt::ALL, None).unwrap();
+        l.jacobians(&m).unwrap()
+    };
+    for (ctrl, clamped) in [
+        ([2.0, 0.2, -0.3, 0.5], true),
+        ([0.3, 0.2, -0.3, 0.1], false),
+    ] {
+        let e = check(&m, &s, &ctrl, Coordinates::Minimal, None, 1e-6);
+        eprintln!("clamped {clamped}: max rel err {e:e}");
+        check(&m, &s, &ctrl, Coordinates::Maximal, None, 1e-6);
+        coloured_vs_reference(&m, &s, &ctrl, Coordinates::Minimal, None);
+        let b = lin(&ctrl).b;
+        assert_eq!(b.column(0).amax() == 0.0, clamped, "{b}");
+    }
+}

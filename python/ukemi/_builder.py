@@ -126,13 +126,15 @@ class ModelBuilder:
                           bool(loop), _per_dof("frictionloss", frictionloss))
 
     def add_actuator(self, name: str, joint: str, gear: float = 1.0, ctrlrange=None,
-                     dof: int = 0, kp: float = 0.0, kv: float = 0.0, forcerange=None) -> None:
+                     dof: int = 0, kp: float = 0.0, kv: float = 0.0, forcerange=None,
+                     actuatorfrcrange=None) -> None:
         """Add an actuator on free dof ``dof`` of ``joint``: a motor, generalized force
         ``gear * F`` with ``F = clamp(ctrl, ctrlrange)``; with ``kp``, a position servo
         ``F = kp (u - gear q) - kv gear q̇`` (MuJoCo's ``<position>``); with ``kv`` alone, a
         velocity servo ``F = kv (u - gear q̇)`` (``<velocity>``). ``F`` is clamped to
-        ``forcerange``. A servo's velocity gain acts at the step's next velocity while ``F`` is
-        inside its range (as MuJoCo's ``implicitfast`` integrator takes it), so stiff servos
+        ``forcerange``, then the generalized force ``gear * F`` to ``actuatorfrcrange`` (MuJoCo's
+        joint attribute, here for the one actuator on the dof). A servo's velocity gain acts at
+        the step's next velocity while ``F`` is inside its ranges (as MuJoCo's ``implicitfast`` integrator takes it), so stiff servos
         stay stable at large time steps.
 
         Args:
@@ -144,9 +146,13 @@ class ModelBuilder:
             kp: Position gain (N·m or N per unit of ``gear q``), >= 0; 0: none.
             kv: Velocity gain, >= 0; 0: none.
             forcerange: ``(lower, upper)`` clamp of the scalar force ``F``, or None.
+            actuatorfrcrange: ``(lower, upper)`` clamp of the generalized force ``gear * F`` on
+                the dof (N·m or N), applied after ``forcerange``, or None.
         """
         rng = None if ctrlrange is None else tuple(as_vector("ctrlrange", ctrlrange, 2))
         frange = None if forcerange is None else tuple(as_vector("forcerange", forcerange, 2))
+        jrange = (None if actuatorfrcrange is None
+                  else tuple(as_vector("actuatorfrcrange", actuatorfrcrange, 2)))
         if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or dof < 0:
             raise TypeError(f"`dof` must be a non-negative integer, got {dof!r}")
         gains = {"kp": as_scalar("kp", kp), "kv": as_scalar("kv", kv)}
@@ -154,7 +160,7 @@ class ModelBuilder:
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"`{key}` must be finite and >= 0, got {value!r}")
         self._b.add_actuator(str(name), str(joint), int(dof), as_scalar("gear", gear), rng,
-                             gains["kp"], gains["kv"], frange)
+                             gains["kp"], gains["kv"], frange, jrange)
 
     def add_geom(self, name: str, body: str, shape: str, size=(), pos=(0.0, 0.0, 0.0),
                  quat=(1.0, 0.0, 0.0, 0.0), friction: float = 0.5, contact: str | None = "nonlinear",

@@ -174,6 +174,52 @@ fn transmission<'a, 'i>(
     Ok((map.engine_joint.clone(), map.dof, TransmissionSpec::Joint))
 }
 
+/// A joint's `actuatorfrcrange` clamps the total actuator force on its dof: where one joint
+/// actuator alone drives the dof, that is a clamp of its generalized force
+/// (`Actuator::joint_forcerange`). Where several actuators, or a tendon or site actuator (a
+/// site's wrench reaches the dofs of the bodies above it), could drive it, the sum is not
+/// modelled: ignored with a warning at the joint.
+pub(super) fn resolve_joint_force_ranges(ctx: &mut Ctx, tree: &Tree, model: &mut crate::Model) {
+    use crate::model::Transmission;
+    let sites =
+        (model.actuators.iter()).any(|a| matches!(a.transmission, Transmission::Site { .. }));
+    for map in &tree.joints {
+        let Some((range, node)) = map.actfrcrange else {
+            continue;
+        };
+        let Some(ji) = model.joints.iter().position(|j| j.name == map.engine_joint) else {
+            continue;
+        };
+        let on_dof = |a: &crate::model::Actuator| match &a.transmission {
+            Transmission::Joint { joint, dof } => *joint == ji && *dof == map.dof,
+            _ => false,
+        };
+        let drivers: Vec<usize> = (0..model.actuators.len())
+            .filter(|&a| on_dof(&model.actuators[a]))
+            .collect();
+        let tendon = (model.actuators.iter()).any(|a| match &a.transmission {
+            Transmission::Tendon(terms) => terms.iter().any(|t| t.0 == ji && t.1 == map.dof),
+            _ => false,
+        });
+        match (drivers.as_slice(), tendon || sites) {
+            ([], false) => {}
+            ([a], false) => model.actuators[*a].joint_forcerange = Some(range),
+            _ => {
+                // (the id is of this document's joint element)
+                let Some(node) = ctx.doc.get_node(node) else {
+                    continue;
+                };
+                ctx.warn(
+                    node,
+                    "`actuatorfrcrange` is ignored: the joint's total actuator force is clamped \
+                     only where one joint actuator alone drives it (each actuator's own \
+                     `forcerange` is applied)",
+                );
+            }
+        }
+    }
+}
+
 /// MuJoCo's gain and affine bias of each actuator shortcut.
 fn gain_bias<'a, 'i>(
     ctx: &Ctx<'a, 'i>,

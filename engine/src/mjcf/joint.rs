@@ -24,6 +24,8 @@ pub(super) struct JointDef<'a, 'i> {
     pub frictionloss: f64,
     pub springref: f64,
     pub qpos_ref: f64,
+    /// Clamp of the total actuator force on the joint (`actuatorfrcrange`, when limited).
+    pub actfrcrange: Option<(f64, f64)>,
 }
 
 /// Where a MuJoCo joint lives in the engine.
@@ -34,6 +36,8 @@ pub(super) struct JointMap {
     pub engine_joint: String,
     /// First free dof of this MuJoCo joint within the engine joint.
     pub dof: usize,
+    /// `actuatorfrcrange` (when limited) and the joint element, for its warnings.
+    pub actfrcrange: Option<((f64, f64), roxmltree::NodeId)>,
 }
 
 pub(super) fn parse_joint<'a, 'i>(
@@ -114,6 +118,7 @@ pub(super) fn parse_joint<'a, 'i>(
         frictionloss: num(ctx, "frictionloss")?,
         springref: conv(ctx, num(ctx, "springref")?),
         qpos_ref: conv(ctx, num(ctx, "ref")?),
+        actfrcrange: actuator_force_range(ctx, node, class, free_elem)?,
         name,
         kind,
         pos,
@@ -130,18 +135,33 @@ pub(super) fn parse_joint<'a, 'i>(
             return Err(ctx.err(node, format!("attribute `{what}` = {v}: must be >= 0")));
         }
     }
-    // MuJoCo clamps a joint's total actuator force to `actuatorfrcrange` (limited explicitly or
-    // by `autolimits`); ukemi clamps each actuator's own `forcerange` only
-    let frc_range = ctx.nums(node, class, "actuatorfrcrange", 2)?;
-    let frc_limited = ctx.tristate(node, class, "actuatorfrclimited")?;
-    if frc_limited.unwrap_or(ctx.compiler.autolimits && frc_range.is_some()) {
-        ctx.warn(
-            node,
-            "`actuatorfrcrange` is ignored: the joint's total actuator force is not clamped \
-             (each actuator's own `forcerange` is)",
-        );
-    }
     Ok(def)
+}
+
+/// `actuatorfrcrange` where it is limited (explicitly or by `autolimits`): MuJoCo clamps the
+/// joint's total actuator force to it.
+fn actuator_force_range<'a, 'i>(
+    ctx: &Ctx<'a, 'i>,
+    node: Node<'a, 'i>,
+    class: &str,
+    free_elem: bool,
+) -> Result<Option<(f64, f64)>> {
+    if free_elem {
+        return Ok(None);
+    }
+    let range = ctx.nums(node, class, "actuatorfrcrange", 2)?;
+    let limited = ctx.tristate(node, class, "actuatorfrclimited")?;
+    match (
+        limited.unwrap_or(ctx.compiler.autolimits && range.is_some()),
+        range,
+    ) {
+        (false, _) => Ok(None),
+        (true, Some(r)) if r[0] <= r[1] => Ok(Some((r[0], r[1]))),
+        (true, r) => Err(ctx.err(
+            node,
+            format!("attribute `actuatorfrcrange` = {r:?}: need lower <= upper when limited"),
+        )),
+    }
 }
 
 /// The engine joint of one body's MuJoCo joints, and the map of each MuJoCo joint to its dofs.
@@ -268,6 +288,7 @@ pub(super) fn group_joints(
             kind: j.kind.clone(),
             engine_joint: name.clone(),
             dof,
+            actfrcrange: j.actfrcrange.map(|r| (r, j.node.id())),
         });
         dof += match j.kind.as_str() {
             "free" => 6,

@@ -32,8 +32,9 @@
 //!   each is reported as a warning.
 //! * Servos' position terms act at the current configuration (explicit), like springs; their
 //!   velocity gains at the next velocity (implicit, as in MuJoCo's `implicitfast`).
-//! * A joint's `actuatorfrcrange` (MuJoCo's clamp of its total actuator force) is ignored with a
-//!   warning; each actuator's own `forcerange` is applied.
+//! * A joint's `actuatorfrcrange` (MuJoCo's clamp of its total actuator force) clamps the force
+//!   of the one joint actuator that drives it (`Actuator::joint_forcerange`); where several
+//!   actuators, or a tendon or site actuator, drive it, it is ignored with a warning.
 //! * Joint `frictionloss` is hard dry friction: a joint held below its friction moves only by the
 //!   solver's complementarity tolerance (MuJoCo's is soft and creeps: `solreffriction`,
 //!   `solimpfriction`, ignored here).
@@ -163,6 +164,7 @@ fn load(xml: &str, source: &str, dir: Option<&Path>) -> Result<MjcfModel> {
     actuator::resolve_dampratios(&mut model)
         .map_err(|e| crate::Error::model("actuator", "dampratio", e))?;
     actuator::resolve_inherited_ranges(&ctx, &mut model, &inherit)?;
+    actuator::resolve_joint_force_ranges(&mut ctx, &tree, &mut model);
     if let Some(k) = elements(root).find(|n| n.tag_name().name() == "keyframe") {
         model.keyframes = actuator::read_keyframes(&ctx, k, &model.qpos0, model.nv, model.nu())?;
     }

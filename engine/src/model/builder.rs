@@ -209,6 +209,10 @@ pub struct ActuatorSpec {
     pub bias: [f64; 3],
     /// Clamp of the scalar actuator force (MuJoCo's `forcerange`), if any.
     pub forcerange: Option<(f64, f64)>,
+    /// Clamp of the generalized force `gear · F` on the joint dof, after `forcerange` (MuJoCo's
+    /// joint `actuatorfrcrange` where this actuator alone drives the dof); joint
+    /// transmissions only.
+    pub joint_forcerange: Option<(f64, f64)>,
     /// Where the force acts (default: `joint`'s dof `dof`).
     pub transmission: TransmissionSpec,
 }
@@ -225,6 +229,7 @@ impl ActuatorSpec {
             gain: 1.0,
             bias: [0.0; 3],
             forcerange: None,
+            joint_forcerange: None,
             transmission: TransmissionSpec::Joint,
         }
     }
@@ -684,18 +689,33 @@ impl ModelBuilder {
                     Error::model(f("ctrlrange"), (lo, hi), "need finite lower < upper")
                 );
             }
-            if let Some((lo, hi)) = spec.forcerange {
-                ensure!(
-                    !lo.is_nan() && !hi.is_nan() && lo <= hi,
-                    Error::model(f("forcerange"), (lo, hi), "need lower <= upper")
-                );
+            for (field, range) in [
+                ("forcerange", spec.forcerange),
+                ("joint_forcerange", spec.joint_forcerange),
+            ] {
+                if let Some((lo, hi)) = range {
+                    ensure!(
+                        !lo.is_nan() && !hi.is_nan() && lo <= hi,
+                        Error::model(f(field), (lo, hi), "need lower <= upper")
+                    );
+                }
             }
+            ensure!(
+                spec.joint_forcerange.is_none()
+                    || matches!(transmission, crate::model::Transmission::Joint { .. }),
+                Error::model(
+                    f("joint_forcerange"),
+                    format!("{:?}", spec.joint_forcerange),
+                    "applies to joint transmissions only"
+                )
+            );
             out.push(Actuator {
                 name: spec.name.clone(),
                 transmission,
                 gear: spec.gear,
                 ctrlrange: spec.ctrlrange,
                 forcerange: spec.forcerange,
+                joint_forcerange: spec.joint_forcerange,
                 gain: spec.gain,
                 bias: spec.bias,
             });

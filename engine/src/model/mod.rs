@@ -56,6 +56,10 @@ pub struct Actuator {
     pub ctrlrange: Option<(f64, f64)>,
     /// Clamp of the scalar force `F` (N or N·m), if any (MuJoCo's `forcerange`).
     pub forcerange: Option<(f64, f64)>,
+    /// Clamp of its generalized force `gear · F` on its joint dof, applied after `forcerange`
+    /// (MuJoCo's joint `actuatorfrcrange`, which clamps the total actuator force on a dof:
+    /// the same where this actuator alone drives it). Joint transmissions only.
+    pub joint_forcerange: Option<(f64, f64)>,
     /// Gain on the control.
     pub gain: f64,
     /// Bias: constant, per unit of `gear·q`, per unit of `gear·q̇` (position/velocity servos).

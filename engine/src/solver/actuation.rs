@@ -69,11 +69,26 @@ pub(crate) fn length_and_rate(
 
 /// The scalar force of actuator `act` at control `ctrl` and transmission length and rate.
 pub(crate) fn actuator_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> f64 {
-    let force = unclamped_force(act, ctrl, length, rate);
-    match act.forcerange {
-        Some((lo, hi)) => force.clamp(lo, hi),
-        None => force,
+    clamped(act, unclamped_force(act, ctrl, length, rate)).0
+}
+
+/// `force` clamped to the actuator's `forcerange`, then its generalized force `gear · F` to
+/// `joint_forcerange` (MuJoCo's order); and whether it lies strictly inside both ranges.
+fn clamped(act: &Actuator, force: f64) -> (f64, bool) {
+    let mut inside = true;
+    let mut f = force;
+    if let Some((lo, hi)) = act.forcerange {
+        inside &= lo < f && f < hi;
+        f = f.clamp(lo, hi);
     }
+    if let Some((lo, hi)) = act.joint_forcerange {
+        let g = act.gear * f;
+        inside &= lo < g && g < hi;
+        if act.gear != 0.0 && !(lo <= g && g <= hi) {
+            f = g.clamp(lo, hi) / act.gear;
+        }
+    }
+    (f, inside)
 }
 
 /// [`actuator_force`] before its force range.
@@ -91,7 +106,8 @@ fn unclamped_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> f64 {
 
 /// The explicit part of actuator `act`'s force and the velocity gain `∂F/∂L̇` taken implicitly
 /// (0: none), at control `ctrl` and transmission length and current rate: a joint or tendon
-/// servo (`bias₂ ≠ 0`) whose unclamped force lies inside its force range has the force less its
+/// servo (`bias₂ ≠ 0`) whose unclamped force lies inside its force ranges (`forcerange`,
+/// `joint_forcerange`) has the force less its
 /// velocity term, and gain `bias₂ gear`; any other actuator its whole force ([`actuator_force`]),
 /// and gain 0. The force is then `explicit + gain · L̇⁺`, `L̇⁺` at the next midpoint velocity.
 pub(crate) fn split_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> (f64, f64) {
@@ -101,9 +117,9 @@ pub(crate) fn split_force(act: &Actuator, ctrl: f64, length: f64, rate: f64) -> 
     }
     let force = unclamped_force(act, ctrl, length, rate);
     let gain = act.bias[2] * act.gear;
-    match act.forcerange {
-        Some((lo, hi)) if !(lo < force && force < hi) => (force.clamp(lo, hi), 0.0),
-        _ => (force - gain * rate, gain),
+    match clamped(act, force) {
+        (f, false) => (f, 0.0),
+        (_, true) => (force - gain * rate, gain),
     }
 }
 
@@ -206,6 +222,7 @@ mod tests {
             gear: 2.0,
             ctrlrange: None,
             forcerange,
+            joint_forcerange: None,
             gain: 50.0,
             bias: [0.0, -50.0, -8.0],
         }
@@ -239,5 +256,27 @@ mod tests {
             ..servo(None)
         };
         assert_eq!(split_force(&tendon, u, length, rate).1, -8.0 * 2.0);
+    }
+
+    /// A joint's range clamps the generalized force `gear · F` after the actuator's own range
+    /// (MuJoCo's order), splitting off the velocity gain only inside both.
+    #[test]
+    fn a_joint_force_range_clamps_the_generalized_force_after_the_force_range() {
+        let (u, length, rate) = (0.3, 0.1, 0.2);
+        // F = 1.8 inside forcerange (-10, 10); gear · F = 3.6
+        let act = Actuator {
+            joint_forcerange: Some((-3.0, 3.0)),
+            ..servo(Some((-10.0, 10.0)))
+        };
+        assert_eq!(actuator_force(&act, u, length, rate), 1.5);
+        assert_eq!(split_force(&act, u, length, rate), (1.5, 0.0));
+        // inside both at rate 0.3: split as before (F = 15 - 10 - 16 · 0.3 = 0.2, gear · F = 0.4)
+        let (explicit, gain) = split_force(&act, u, length, 0.3);
+        assert!((explicit + gain * 0.3 - 0.2).abs() < 1e-12 && gain == -16.0);
+        // the force range first: F = -75 → -10, then gear · F = -20 → -3
+        assert_eq!(actuator_force(&act, u, length, 5.0), -1.5);
+        // a negative gear: F = 15 + 10 + 3.2 → 10, gear · F = -20 → -3, so F = 1.5
+        let flipped = Actuator { gear: -2.0, ..act };
+        assert_eq!(actuator_force(&flipped, u, length, rate), 1.5);
     }
 }
