@@ -275,8 +275,11 @@ def test_bad_xml_raises_mjcf_error_with_element_and_line(xml, what, line):
 
 
 UNSUPPORTED = [
-    "<mujoco><asset><mesh name='m' vertex='0 0 0 1 0 0 0 1 0 0 0 1'/></asset><worldbody><body>"
-    "<joint/><geom type='mesh' mesh='m' mass='0'/><geom size='.1'/></body></worldbody></mujoco>",
+    "<mujoco><asset><mesh name='m' vertex='0 0 0 1 0 0 0 1 0 0 0 1' inertia='shell'/></asset>"
+    "<worldbody><body><joint/><geom type='mesh' mesh='m' mass='0'/><geom size='.1'/></body>"
+    "</worldbody></mujoco>",
+    "<mujoco><worldbody><body><joint/><geom type='hfield' size='1 1 1' mass='0'/>"
+    "<geom size='.1'/></body></worldbody></mujoco>",
     "<mujoco><worldbody><body><joint type='hinge'/><joint type='slide'/><geom size='.1'/></body>"
     "</worldbody></mujoco>",
     "<mujoco><worldbody><body><freejoint/><geom size='.1'/><site name='s'/><site name='r'/></body>"

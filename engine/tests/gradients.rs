@@ -1431,3 +1431,43 @@ fn joint_force_range_jacobians_match_the_step() {
         assert_eq!(b.column(0).amax() == 0.0, clamped, "{b}");
     }
 }
+
+/// A mesh (an irregular convex hull) resting and sliding on the floor: the Jacobians through
+/// its vertex contacts match the smoothed step.
+#[test]
+fn mesh_contact_jacobians_match_the_smoothed_step() {
+    use std::sync::Arc;
+    use ukemi_engine::contact::geometry::ConvexHull;
+    let rock: Vec<nalgebra::Vector3<f64>> = [
+        [0.0, 0.0, 0.12],
+        [0.1, 0.0, -0.03],
+        [-0.05, 0.09, -0.03],
+        [-0.05, -0.08, -0.04],
+        [0.02, 0.01, 0.05],
+        [0.06, 0.05, 0.02],
+    ]
+    .iter()
+    .map(|p| nalgebra::Vector3::from(*p))
+    .collect();
+    let hull = Arc::new(ConvexHull::new(&rock).unwrap());
+    let b = contact_scenes::floor(ModelBuilder::new().timestep(0.01), 0.4);
+    let b = contact_scenes::free_body(
+        b,
+        "rock",
+        1.0,
+        Shape::Mesh { hull },
+        [0.0, 0.0, 0.05],
+        [1.0, 0.0, 0.0, 0.0],
+        0.4,
+        ContactModel::Nonlinear,
+    );
+    let m = tight(b.compile().unwrap());
+    for v in [[0.0; 6], [0.4, 0.1, -0.1, 0.0, 0.0, 0.5]] {
+        let s = settled(&m, &v);
+        for kappa in [1e-3, 1e-5] {
+            let e = check(&m, &s, &[], Coordinates::Minimal, Some(kappa), 1e-5);
+            eprintln!("mesh on floor {v:?} kappa {kappa:e}: max rel err {e:e}");
+        }
+        coloured_vs_reference(&m, &s, &[], Coordinates::Minimal, Some(1e-4));
+    }
+}

@@ -38,16 +38,26 @@
 //! | sphere / point – box | 1: signed distance of the centre to the box, minus the radius |
 //! | capsule – box | 3: end spheres and the midpoint sphere against the box |
 //! | box – box | 16: each corner of A against B, each corner of B against A |
+//! | mesh – plane | one per hull vertex |
+//! | sphere / point – mesh | 1: signed distance of the centre to the hull, minus the radius |
+//! | capsule – mesh | 3: end spheres and the midpoint sphere against the hull |
+//! | box – mesh | each corner of the box against the hull, each hull vertex against the box |
+//! | mesh – mesh | each hull vertex of A against B's hull, and of B against A's |
+//!
+//! A mesh is the convex hull of its vertices ([`ConvexHull`], as MuJoCo collides it); the
+//! signed distance to it is exact outside (closest point on the hull's triangles) and the
+//! depth below the nearest face plane inside, as for a box.
 //!
 //! A point is a sphere of radius 0. The plane is always B; in pairs of different kinds the
-//! "smaller" kind (sphere/point < capsule < box < cylinder < ellipsoid < plane) is A, and
+//! "smaller" kind (sphere/point < capsule < box < mesh < cylinder < ellipsoid < plane) is A, and
 //! [`candidates`] reports when it had to exchange the two geoms.
 //!
 //! ## Limitations
 //! Cylinders and ellipsoids only collide with planes; plane–plane is unsupported. Capsule–box
-//! only tests three spheres on the segment, so a capsule crossing a box edge between them
-//! (e.g. a long capsule lying across a box) is not detected. Box–box only tests corners, so
-//! edge–edge contact (two boxes crossed edge on edge) is not detected. Capsule–capsule tests
+//! and capsule–mesh only test three spheres on the segment, so a capsule crossing a box edge
+//! between them (e.g. a long capsule lying across a box) is not detected. Box–box, box–mesh
+//! and mesh–mesh only test vertices, so edge–edge contact (two boxes crossed edge on edge) is
+//! not detected. Capsule–capsule tests
 //! the ends of A only, so parallel capsules are supported at two points only where A's ends
 //! lie alongside B's segment.
 //!
@@ -59,7 +69,11 @@
 //! normal of the face with the smallest half-extent (+ side, lowest axis on ties); a cylinder
 //! axis parallel to the plane normal → the rim point along the disk's local +x.
 
+use std::sync::Arc;
+
 use nalgebra::{Matrix3, Vector3};
+
+pub use super::hull::ConvexHull;
 
 #[path = "pairs/kernels.rs"]
 mod kernels;
@@ -104,6 +118,11 @@ pub enum Shape {
     },
     /// A point (a sphere of radius 0).
     Point,
+    /// The convex hull of a mesh, in the geom frame (MuJoCo collides a mesh as its hull).
+    Mesh {
+        /// The hull (shared by every geom of one mesh).
+        hull: Arc<ConvexHull>,
+    },
 }
 
 impl Shape {
@@ -117,6 +136,7 @@ impl Shape {
             Shape::Cylinder { .. } => "cylinder",
             Shape::Ellipsoid { .. } => "ellipsoid",
             Shape::Point => "point",
+            Shape::Mesh { .. } => "mesh",
         }
     }
 
@@ -126,9 +146,10 @@ impl Shape {
             Shape::Sphere { .. } | Shape::Point => 0,
             Shape::Capsule { .. } => 1,
             Shape::Box { .. } => 2,
-            Shape::Cylinder { .. } => 3,
-            Shape::Ellipsoid { .. } => 4,
-            Shape::Plane => 5,
+            Shape::Mesh { .. } => 3,
+            Shape::Cylinder { .. } => 4,
+            Shape::Ellipsoid { .. } => 5,
+            Shape::Plane => 6,
         }
     }
 
@@ -144,7 +165,7 @@ impl Shape {
     /// Checks that every dimension is finite and non-negative.
     fn validate(&self) -> Result<(), String> {
         let dims: Vec<f64> = match self {
-            Shape::Plane | Shape::Point => Vec::new(),
+            Shape::Plane | Shape::Point | Shape::Mesh { .. } => Vec::new(),
             Shape::Sphere { radius } => vec![*radius],
             Shape::Capsule {
                 radius,
@@ -277,6 +298,20 @@ pub enum Feature {
         /// The ball of B.
         b: Ball,
     },
+    /// A ball of A against the convex hull of mesh B.
+    SphereHull {
+        /// The ball of A.
+        a: Ball,
+        /// The hull of B.
+        hull_b: Arc<ConvexHull>,
+    },
+    /// The convex hull of mesh A against a ball of B (a vertex of B's hull, a box corner).
+    HullSphere {
+        /// The hull of A.
+        hull_a: Arc<ConvexHull>,
+        /// The ball of B.
+        b: Ball,
+    },
 }
 
 /// Evaluated candidate.
@@ -350,6 +385,10 @@ pub fn evaluate(
         Feature::BoxSphere { half_extents_a, b } => {
             kernels::box_sphere(half_extents_a, pose_a, b, pose_b)
         }
+        Feature::SphereHull { a, hull_b } => kernels::sphere_hull(a, pose_a, hull_b, pose_b),
+        Feature::HullSphere { hull_a, b } => {
+            kernels::sphere_hull(b, pose_b, hull_a, pose_a).swapped()
+        }
     }
 }
 
@@ -415,6 +454,7 @@ fn against_plane(a: &Shape) -> Result<Vec<Feature>, String> {
             half_length,
         } => cylinder_plane(radius, half_length),
         Shape::Ellipsoid { radii } => vec![Feature::EllipsoidPlane { radii_a: radii }],
+        Shape::Mesh { ref hull } => hull.vertices.iter().map(|&v| sphere(v, 0.0)).collect(),
         Shape::Plane => return Err("plane-plane collision is not supported".to_string()),
     })
 }
@@ -458,6 +498,10 @@ fn between_solids(a: &Shape, b: &Shape) -> Result<Vec<Feature>, String> {
         (None, Shape::Box { half_extents: ha }, Shape::Box { half_extents: hb }) => {
             Some(box_box(ha, hb))
         }
+        (None, Shape::Box { half_extents }, Shape::Mesh { hull }) => {
+            Some(box_hull(half_extents, hull))
+        }
+        (None, Shape::Mesh { hull: ha }, Shape::Mesh { hull: hb }) => Some(hull_hull(ha, hb)),
         _ => None,
     };
     features.ok_or_else(|| {
@@ -490,6 +534,10 @@ fn ball_against(a: Ball, b: &Shape) -> Option<Vec<Feature>> {
         Shape::Box { half_extents } => Feature::SphereBox {
             a,
             half_extents_b: half_extents,
+        },
+        Shape::Mesh { ref hull } => Feature::SphereHull {
+            a,
+            hull_b: hull.clone(),
         },
         _ => return None,
     };
@@ -525,8 +573,48 @@ fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
                     .to_vec(),
             )
         }
+        // as against a box: the end spheres and the midpoint sphere
+        Shape::Mesh { ref hull } => {
+            let middle = ball(Vector3::zeros(), a.radius);
+            let balls = [ends[0], middle, ends[1]];
+            Some(
+                balls
+                    .map(|a| Feature::SphereHull {
+                        a,
+                        hull_b: hull.clone(),
+                    })
+                    .to_vec(),
+            )
+        }
         _ => None,
     }
+}
+
+/// Box A against mesh B: the corners of A against B's hull, then the hull's vertices against A.
+fn box_hull(half_a: &Vector3<f64>, hull_b: &Arc<ConvexHull>) -> Vec<Feature> {
+    let a_in_b = box_corners(half_a).map(|c| Feature::SphereHull {
+        a: ball(c, 0.0),
+        hull_b: hull_b.clone(),
+    });
+    let b_in_a = hull_b.vertices.iter().map(|&v| Feature::BoxSphere {
+        half_extents_a: *half_a,
+        b: ball(v, 0.0),
+    });
+    a_in_b.into_iter().chain(b_in_a).collect()
+}
+
+/// Mesh A against mesh B: the vertices of each hull against the other (as boxes' corners; an
+/// edge crossing an edge is not detected).
+fn hull_hull(hull_a: &Arc<ConvexHull>, hull_b: &Arc<ConvexHull>) -> Vec<Feature> {
+    let a_in_b = hull_a.vertices.iter().map(|&v| Feature::SphereHull {
+        a: ball(v, 0.0),
+        hull_b: hull_b.clone(),
+    });
+    let b_in_a = hull_b.vertices.iter().map(|&v| Feature::HullSphere {
+        hull_a: hull_a.clone(),
+        b: ball(v, 0.0),
+    });
+    a_in_b.chain(b_in_a).collect()
 }
 
 /// Box against box: the corners of A against B, then the corners of B against A.

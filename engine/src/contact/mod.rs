@@ -18,6 +18,7 @@
 //! restitution), as in the paper.
 pub mod cone;
 pub mod geometry;
+pub mod hull;
 pub mod slide_pair;
 pub mod slip;
 pub mod wrench;
@@ -165,11 +166,13 @@ impl Contact {
     /// corner, a rim point, an ellipsoid's support point or a plane), see [`slip`].
     pub fn radii(&self) -> (f64, f64) {
         match &self.feature {
-            Feature::SpherePlane { a } | Feature::SphereBox { a, .. } => (a.radius, 0.0),
+            Feature::SpherePlane { a }
+            | Feature::SphereBox { a, .. }
+            | Feature::SphereHull { a, .. } => (a.radius, 0.0),
             Feature::SphereSphere { a, b } => (a.radius, b.radius),
             Feature::SphereCapsule { a, b } => (a.radius, b.radius),
             Feature::CapsuleCapsule { a, b } => (a.radius, b.radius),
-            Feature::BoxSphere { b, .. } => (0.0, b.radius),
+            Feature::BoxSphere { b, .. } | Feature::HullSphere { b, .. } => (0.0, b.radius),
             Feature::DiskPlane { .. } | Feature::EllipsoidPlane { .. } => (0.0, 0.0),
         }
     }

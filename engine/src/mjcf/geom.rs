@@ -1,10 +1,13 @@
 //! `<geom>`: shape, size, pose (with `fromto`), contact attributes and mass properties.
+use std::sync::Arc;
+
 use nalgebra::Vector3;
 use roxmltree::Node;
 
 use super::frame::{Frame, local_frame, z_to};
 use super::inertia::unit_inertia;
 use super::parse::Ctx;
+use crate::contact::hull::ConvexHull;
 use crate::{Result, Shape};
 
 /// A parsed geom, posed in its MJCF body's frame.
@@ -20,8 +23,10 @@ pub(super) struct GeomDef {
     pub friction: f64,
     /// Mass and principal inertia (about the geom origin, geom axes), if it counts for inertia.
     pub mass: Option<(f64, Vector3<f64>)>,
-    /// Would contribute mass, but its type has no inertia formula here (meshes, height fields).
+    /// Would contribute mass, but its type has no inertia formula here (height fields).
     pub mass_unsupported: bool,
+    /// A mesh geom's convex hull (in `frame`, the mesh's principal frame).
+    pub hull: Option<Arc<ConvexHull>>,
 }
 
 impl GeomDef {
@@ -49,6 +54,9 @@ impl GeomDef {
             },
             "ellipsoid" => Shape::Ellipsoid {
                 radii: Vector3::new(s[0], s[1], s[2]),
+            },
+            "mesh" => Shape::Mesh {
+                hull: self.hull.clone()?,
             },
             _ => return None,
         })
@@ -130,6 +138,44 @@ pub(super) fn parse_geom<'a, 'i>(
         return Err(ctx.err(node, "`mass` and `density` must be >= 0"));
     }
     let wants_mass = counts && mass_attr.map_or(density > 0.0, |m| m > 0.0);
+    // a mesh: its hull, placed at the mesh's principal frame, and the solid hull's mass (read
+    // only where the geom collides or its mass sets its body's: visual meshes, often large
+    // files, are not read)
+    let mut hull = None;
+    let collides = !(contype == 0 && conaffinity == 0) || ctx.paired.contains(&name);
+    let weighs = wants_mass
+        && match ctx.compiler.inertia_from_geom {
+            Some(always) => always,
+            None => node.parent().is_some_and(|body| {
+                body.tag_name().name() == "body"
+                    && !super::parse::elements(body).any(|c| c.tag_name().name() == "inertial")
+            }),
+        };
+    if kind == "mesh" && (collides || weighs) {
+        let Some(mesh_name) = ctx.raw(node, class, "mesh") else {
+            return Err(ctx.err(node, "a mesh geom needs a `mesh`"));
+        };
+        let mesh = super::mesh::mesh(ctx, node, &mesh_name)?;
+        frame = frame.compose(&mesh.frame);
+        hull = Some(mesh.hull.clone());
+        if weighs {
+            let rho = mass_attr.map_or(density, |m| m / mesh.volume);
+            return Ok(GeomDef {
+                mass_unsupported: false,
+                name,
+                line,
+                kind,
+                size,
+                frame,
+                contype,
+                conaffinity,
+                condim,
+                friction,
+                mass: Some((rho * mesh.volume, mesh.moments * rho)),
+                hull,
+            });
+        }
+    }
     let mass = match unit_inertia(&kind, &size) {
         Some((vol, unit)) if wants_mass => {
             if size.iter().take(size_count(&kind)).any(|s| *s <= 0.0) {
@@ -156,6 +202,7 @@ pub(super) fn parse_geom<'a, 'i>(
         condim,
         friction,
         mass,
+        hull,
     })
 }
 

@@ -2,9 +2,12 @@
 //!
 //! Supported: `include` (spliced in, paths beside the including file or the model file:
 //! [`include`]), `compiler` (angle, eulerseq, inertiafromgeom, inertiagrouprange, autolimits,
-//! settotalmass), `option` (timestep, gravity), nested `default` classes with `class` and
-//! `childclass`, the body tree (of every `worldbody`; bodies' `gravcomp`) with every orientation
-//! form, `inertial`, inertia from geoms (sphere, capsule, cylinder, box, ellipsoid),
+//! settotalmass, meshdir, assetdir), `option` (timestep, gravity), nested `default` classes with
+//! `class` and `childclass`, the body tree (of every `worldbody`; bodies' `gravcomp`) with every
+//! orientation form, `inertial`, inertia from geoms (sphere, capsule, cylinder, box, ellipsoid,
+//! mesh), `asset/mesh` from STL or OBJ files or inline `vertex` lists with `scale` (a mesh geom
+//! collides and weighs as the convex hull of its vertices, as in MuJoCo,
+//! [`crate::contact::hull::ConvexHull`]),
 //! hinge/slide/ball/free joints (several joints of one body become one engine joint with MuJoCo's
 //! dofs in MuJoCo's order, each hinge about its own anchor), geoms with contact bit masks and
 //! `condim` 1 or 3, `contact/exclude` and `contact/pair` (friction and condim from the pair or its
@@ -28,8 +31,11 @@
 //!   without joints under a moving body is merged into it. Neither appears in `Model::bodies`.
 //! * Joint names: the engine joint of a body with several MuJoCo joints is named by joining
 //!   theirs with `+` (e.g. `rootx+rootz+rooty`); `qpos`/`qvel` are MuJoCo's.
-//! * Geom pairs whose shapes have no collision kernel (e.g. capsule–cylinder) never collide;
-//!   each is reported as a warning.
+//! * Geom pairs whose shapes have no collision kernel (e.g. capsule–cylinder, mesh–cylinder)
+//!   never collide; each is reported as a warning. Mesh hulls touch other shapes at their
+//!   vertices (and a box's corners): an edge crossing an edge is not a contact.
+//! * A mesh's inertia is the solid convex hull's (MuJoCo's `inertia="convex"`; MuJoCo's default
+//!   for a non-convex closed mesh is the mesh's own volume).
 //! * Servos' position terms act at the current configuration (explicit), like springs; their
 //!   velocity gains at the next velocity (implicit, as in MuJoCo's `implicitfast`).
 //! * A joint's `actuatorfrcrange` (MuJoCo's clamp of its total actuator force) clamps the force
@@ -49,6 +55,7 @@ mod geom;
 mod include;
 mod inertia;
 mod joint;
+mod mesh;
 mod parse;
 mod tendon;
 
@@ -114,12 +121,16 @@ fn load(xml: &str, source: &str, dir: Option<&Path>) -> Result<MjcfModel> {
         mass_scale: 1.0,
         paired: Default::default(),
         spliced,
+        mesh_nodes: Default::default(),
+        meshes: Default::default(),
+        dir: dir.map(Path::to_path_buf),
     };
     let root = doc.root_element();
     if root.tag_name().name() != "mujoco" {
         return Err(ctx.err(root, "the root element must be <mujoco>"));
     }
     read_header(&mut ctx, root)?;
+    ctx.mesh_nodes = mesh::index_meshes(&ctx, root)?;
     // geoms an explicit pair collides: kept whatever their bit masks
     for contact in elements(root).filter(|n| n.tag_name().name() == "contact") {
         for pair in elements(contact).filter(|n| n.tag_name().name() == "pair") {
@@ -258,6 +269,14 @@ fn read_compiler<'a, 'i>(ctx: &mut Ctx<'a, 'i>, node: Node<'a, 'i>) -> Result<()
         _ => None,
     };
     c.autolimits = ctx.keyword(node, "", "autolimits", &["true", "false"], "true")? == "true";
+    c.meshdir = node
+        .attribute("meshdir")
+        .map(str::to_string)
+        .or(c.meshdir.take());
+    c.assetdir = node
+        .attribute("assetdir")
+        .map(str::to_string)
+        .or(c.assetdir.take());
     if ctx.keyword(node, "", "coordinate", &["local", "global"], "local")? == "global" {
         return Err(ctx.unsupported(
             node,

@@ -22,6 +22,10 @@ pub(super) struct Compiler {
     pub inertia_groups: (i64, i64),
     /// `settotalmass` (> 0 to rescale).
     pub total_mass: Option<f64>,
+    /// `meshdir`: where mesh files are, relative to the model's folder.
+    pub meshdir: Option<String>,
+    /// `assetdir`: the same for every asset, where `meshdir` is not given.
+    pub assetdir: Option<String>,
 }
 
 impl Default for Compiler {
@@ -33,6 +37,8 @@ impl Default for Compiler {
             autolimits: true,
             inertia_groups: (0, 5),
             total_mass: None,
+            meshdir: None,
+            assetdir: None,
         }
     }
 }
@@ -52,6 +58,11 @@ pub(super) struct Ctx<'a, 'input> {
     pub paired: std::collections::HashSet<String>,
     /// Where each line came from when `<include>`s were spliced in (`None`: `source` alone).
     pub spliced: Option<super::include::Spliced>,
+    /// The `<asset><mesh>` elements by name, and those read so far.
+    pub mesh_nodes: std::collections::HashMap<String, roxmltree::NodeId>,
+    pub meshes: std::collections::HashMap<String, super::mesh::MeshAsset>,
+    /// The model file's folder (mesh files are found from it).
+    pub dir: Option<std::path::PathBuf>,
 }
 
 /// Actuator element names share one default slot (as in MuJoCo).

@@ -773,7 +773,8 @@ fn pair_model(a: ContactModel, b: ContactModel, friction: f64) -> ContactModel {
 
 fn check_shape(shape: &Shape, field: &str) -> Result<()> {
     let sizes: Vec<f64> = match shape {
-        Shape::Plane | Shape::Point => vec![],
+        // (a mesh's hull was checked when it was built)
+        Shape::Plane | Shape::Point | Shape::Mesh { .. } => vec![],
         Shape::Sphere { radius } => vec![*radius],
         Shape::Capsule {
             radius,

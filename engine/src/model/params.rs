@@ -55,7 +55,8 @@ pub(crate) enum Param {
 /// Sizes of a shape, in the order `geom_size` lists them (m).
 fn shape_sizes(shape: &Shape) -> Vec<f64> {
     match shape {
-        Shape::Plane | Shape::Point => vec![],
+        // (a mesh has no size parameters: its hull is its shape)
+        Shape::Plane | Shape::Point | Shape::Mesh { .. } => vec![],
         Shape::Sphere { radius } => vec![*radius],
         Shape::Capsule {
             radius,
@@ -72,7 +73,7 @@ fn shape_sizes(shape: &Shape) -> Vec<f64> {
 
 fn set_shape_size(shape: &mut Shape, i: usize, v: f64) {
     match shape {
-        Shape::Plane | Shape::Point => {}
+        Shape::Plane | Shape::Point | Shape::Mesh { .. } => {}
         Shape::Sphere { radius } => *radius = v,
         Shape::Capsule {
             radius,

@@ -302,6 +302,7 @@ fn bounding_radius(shape: &crate::contact::geometry::Shape) -> f64 {
         } => radius.hypot(half_length),
         Shape::Ellipsoid { radii } => radii.max(),
         Shape::Point => 0.0,
+        Shape::Mesh { ref hull } => hull.radius(),
     }
 }
 

@@ -6,9 +6,25 @@ use super::*;
 use proptest::prelude::*;
 
 /// Shape kinds in the property tests: 0 sphere, 1 point, 2 capsule, 3 box, 4 cylinder,
-/// 5 ellipsoid, 6 plane.
+/// 5 ellipsoid, 6 plane, 7 mesh (the hull of an octahedron's tips and a smaller box's
+/// corners, off centre).
 fn make_shape(kind: usize, d: [f64; 3]) -> Shape {
     match kind {
+        7 => {
+            let mut pts = Vec::new();
+            for (k, dk) in d.iter().enumerate() {
+                for s in [-1.0, 1.0] {
+                    pts.push(Vector3::ith(k, s * dk) + Vector3::new(0.05, -0.03, 0.02));
+                }
+            }
+            for i in 0..8 {
+                let s = |k: usize| if i >> k & 1 == 1 { 0.45 } else { -0.45 };
+                pts.push(Vector3::new(s(0) * d[0], s(1) * d[1], s(2) * d[2]));
+            }
+            Shape::Mesh {
+                hull: std::sync::Arc::new(ConvexHull::new(&pts).unwrap()),
+            }
+        }
         0 => Shape::Sphere { radius: d[0] },
         1 => Shape::Point,
         2 => Shape::Capsule {
@@ -43,7 +59,7 @@ fn rand_pose() -> impl Strategy<Value = GeomPose> {
 
 /// Every supported ordered pair of kinds.
 fn supported_pair() -> impl Strategy<Value = (usize, usize)> {
-    (0..7usize, 0..7usize).prop_filter("supported", |&(a, b)| {
+    (0..8usize, 0..8usize).prop_filter("supported", |&(a, b)| {
         candidates(&make_shape(a, [0.5; 3]), &make_shape(b, [0.5; 3])).is_ok()
     })
 }
@@ -71,7 +87,44 @@ fn unique_witness(f: &Feature, w: &Witness, pa: &GeomPose, pb: &GeomPose) -> boo
         Feature::BoxSphere { half_extents_a, b } => {
             box_unique(&pb.transform_point(&b.center), half_extents_a, pa)
         }
+        Feature::SphereHull { a, hull_b } => {
+            hull_unique(&pa.transform_point(&a.center), hull_b, pb)
+        }
+        Feature::HullSphere { hull_a, b } => {
+            hull_unique(&pb.transform_point(&b.center), hull_a, pa)
+        }
     }
+}
+
+/// Whether φ of a point against a hull is smooth around the point, with a margin: inside, one
+/// nearest face plane; outside, one plane facing the point, its projection on that plane well
+/// inside every other (the closest point inside a face, away from its edges).
+fn hull_unique(point: &Vector3<f64>, hull: &ConvexHull, pose: &GeomPose) -> bool {
+    let margin = 1e-2;
+    let q = pose.rot.transpose() * (point - pose.pos);
+    // distinct planes (coplanar triangles share one)
+    let mut planes: Vec<(Vector3<f64>, f64)> = Vec::new();
+    for (n, d) in hull.planes() {
+        if !planes
+            .iter()
+            .any(|(m, e)| (m - n).amax() < 1e-9 && (e - d).abs() < 1e-9)
+        {
+            planes.push((n, d));
+        }
+    }
+    let mut s: Vec<(f64, usize)> = (planes.iter().enumerate())
+        .map(|(i, (n, d))| (n.dot(&q) - d, i))
+        .collect();
+    s.sort_by(|x, y| y.0.total_cmp(&x.0));
+    if s[0].0 <= 0.0 {
+        return s[0].0 - s[1].0 > margin;
+    }
+    let (n, _) = planes[s[0].1];
+    let foot = q - s[0].0 * n;
+    s[0].0 > margin
+        && (planes.iter().enumerate())
+            .filter(|&(i, _)| i != s[0].1)
+            .all(|(_, (m, e))| m.dot(&foot) - e < -margin)
 }
 
 /// Whether φ of a point against a box is smooth around the point, with a margin.

@@ -225,6 +225,26 @@ pub(super) fn sphere_box(
     sphere_box_world(&pose_a.transform_point(&a.center), a.radius, half_b, pose_b)
 }
 
+/// Ball of A against the convex hull of mesh B: the signed distance of the centre to the hull
+/// minus the radius.
+pub(super) fn sphere_hull(
+    a: &Ball,
+    pose_a: &GeomPose,
+    hull_b: &super::ConvexHull,
+    pose_b: &GeomPose,
+) -> Witness {
+    let center = pose_a.transform_point(&a.center);
+    let q = pose_b.rot.transpose() * (center - pose_b.pos); // centre in B's frame
+    let (dist, point, normal_local) = hull_b.signed_distance(&q);
+    let normal = pose_b.rot * normal_local;
+    Witness {
+        phi: dist - a.radius,
+        point_a: center - a.radius * normal,
+        point_b: pose_b.transform_point(&point),
+        normal,
+    }
+}
+
 /// Box A against a ball of B: the ball against the box with the roles exchanged.
 pub(super) fn box_sphere(
     half_a: &Vector3<f64>,

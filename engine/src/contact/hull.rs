@@ -1,0 +1,360 @@
+//! Convex hulls of meshes. MuJoCo collides a mesh geom as the convex hull of its vertices; so
+//! does ukemi: a hull's vertices are contact points against other shapes, and the signed
+//! distance of a point to the hull ([`ConvexHull::signed_distance`]) is the kernel of every
+//! candidate against it. Its mass properties ([`ConvexHull::mass_properties`]) are those of
+//! the solid hull (MuJoCo's mesh `inertia="convex"`).
+use nalgebra::{Matrix3, Vector3};
+
+/// Below this length a vector has no usable direction (as in the other kernels).
+const MIN_NORM: f64 = 1e-100;
+
+/// A convex polytope: its vertices and outward triangles, in the geom frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConvexHull {
+    /// The hull's vertices (m, geom frame): the mesh points on the hull.
+    pub vertices: Vec<Vector3<f64>>,
+    /// Triangles as vertex indices, counter-clockwise seen from outside.
+    pub triangles: Vec<[usize; 3]>,
+    /// Outward unit normal of each triangle's plane.
+    normals: Vec<Vector3<f64>>,
+    /// Offset of each triangle's plane: `n · x = d` on it, `< d` inside.
+    offsets: Vec<f64>,
+}
+
+impl ConvexHull {
+    /// The convex hull of `points` (at least four, not all in one plane, all finite).
+    pub fn new(points: &[Vector3<f64>]) -> Result<ConvexHull, String> {
+        if let Some(p) = points.iter().find(|p| !p.iter().all(|x| x.is_finite())) {
+            return Err(format!("mesh vertex {p:?} is not finite"));
+        }
+        let center = points
+            .iter()
+            .fold(Vector3::zeros(), |s: Vector3<f64>, p| s + p)
+            / points.len().max(1) as f64;
+        let scale = points
+            .iter()
+            .map(|p| (p - center).amax())
+            .fold(0.0, f64::max);
+        if points.len() < 4 || scale <= 0.0 {
+            return Err(format!(
+                "a mesh needs at least 4 points spanning a volume, got {}",
+                points.len()
+            ));
+        }
+        // (the hull is found at unit scale: the library's tolerance is absolute)
+        let unit: Vec<Vec<f64>> = points
+            .iter()
+            .map(|p| ((p - center) / scale).iter().copied().collect())
+            .collect();
+        let hull = chull::ConvexHull::try_new(&unit, 1e-12, None).map_err(|e| {
+            format!(
+                "no convex hull of the mesh's {} points: {e:?}",
+                points.len()
+            )
+        })?;
+        let (pts, flat) = hull.vertices_indices();
+        // each hull point is a copy of one unit point: back to the input point, bit for bit
+        let key = |p: &[f64]| [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()];
+        let input: std::collections::HashMap<[u64; 3], usize> =
+            unit.iter().enumerate().map(|(i, p)| (key(p), i)).collect();
+        let vertices: Vec<Vector3<f64>> = pts
+            .iter()
+            .map(|p| match input.get(&key(p)) {
+                Some(&i) => points[i],
+                None => Vector3::new(p[0], p[1], p[2]) * scale + center,
+            })
+            .collect();
+        let inside = vertices
+            .iter()
+            .fold(Vector3::zeros(), |s: Vector3<f64>, p| s + p)
+            / vertices.len() as f64;
+        let mut triangles = Vec::with_capacity(flat.len() / 3);
+        for t in flat.chunks_exact(3) {
+            let (a, b, c) = (vertices[t[0]], vertices[t[1]], vertices[t[2]]);
+            let n = (b - a).cross(&(c - a));
+            // (slivers of coplanar points carry no face)
+            if n.norm() <= 1e-14 * scale * scale {
+                continue;
+            }
+            // outward: away from a point inside
+            triangles.push(if n.dot(&(a - inside)) >= 0.0 {
+                [t[0], t[1], t[2]]
+            } else {
+                [t[0], t[2], t[1]]
+            });
+        }
+        let mut out = ConvexHull {
+            vertices,
+            triangles,
+            normals: Vec::new(),
+            offsets: Vec::new(),
+        };
+        out.refresh_planes();
+        Ok(out)
+    }
+
+    fn refresh_planes(&mut self) {
+        self.normals.clear();
+        self.offsets.clear();
+        for t in &self.triangles {
+            let (a, b, c) = (
+                self.vertices[t[0]],
+                self.vertices[t[1]],
+                self.vertices[t[2]],
+            );
+            let n = (b - a).cross(&(c - a)).normalize();
+            self.normals.push(n);
+            self.offsets.push(n.dot(&a));
+        }
+    }
+
+    /// The hull in a new frame: `x' = rot (x - origin)` for every vertex.
+    pub fn transformed(&self, rot: &Matrix3<f64>, origin: &Vector3<f64>) -> ConvexHull {
+        let mut out = self.clone();
+        for v in &mut out.vertices {
+            *v = rot * (*v - origin);
+        }
+        out.refresh_planes();
+        out
+    }
+
+    /// The triangles' planes: outward unit normal and offset (`n · x = d` on the plane).
+    pub fn planes(&self) -> impl Iterator<Item = (Vector3<f64>, f64)> + '_ {
+        self.normals
+            .iter()
+            .copied()
+            .zip(self.offsets.iter().copied())
+    }
+
+    /// The largest distance of a vertex from the geom origin (m).
+    pub fn radius(&self) -> f64 {
+        self.vertices.iter().map(|v| v.norm()).fold(0.0, f64::max)
+    }
+
+    /// Volume (m³), centre of volume (geom frame) and inertia about that centre per unit
+    /// density (geom axes) of the solid hull, by the divergence theorem over tetrahedra from
+    /// the origin to each triangle.
+    pub fn mass_properties(&self) -> (f64, Vector3<f64>, Matrix3<f64>) {
+        let (mut volume, mut first, mut second) = (0.0, Vector3::zeros(), Matrix3::zeros());
+        for t in &self.triangles {
+            let (a, b, c) = (
+                self.vertices[t[0]],
+                self.vertices[t[1]],
+                self.vertices[t[2]],
+            );
+            let v = a.dot(&b.cross(&c)) / 6.0;
+            let s = a + b + c;
+            volume += v;
+            first += v * s / 4.0;
+            // ∫ x xᵀ over the tetrahedron (0, a, b, c)
+            second += v / 20.0
+                * (a * a.transpose() + b * b.transpose() + c * c.transpose() + s * s.transpose());
+        }
+        let com = first / volume;
+        let about_com = second - volume * com * com.transpose();
+        let inertia = Matrix3::identity() * about_com.trace() - about_com;
+        (volume, com, inertia)
+    }
+
+    /// Signed distance of point `q` (geom frame) to the hull's surface, negative inside:
+    /// `(distance, the closest surface point, outward unit normal)`. Outside, the exact closest
+    /// point (over the triangles whose planes face `q`: the closest point lies on one of them);
+    /// inside, the projection onto the nearest face plane (first such face on ties).
+    pub fn signed_distance(&self, q: &Vector3<f64>) -> (f64, Vector3<f64>, Vector3<f64>) {
+        let mut nearest = 0;
+        let mut best = f64::NEG_INFINITY;
+        for (f, (n, d)) in self.normals.iter().zip(&self.offsets).enumerate() {
+            let s = n.dot(q) - d;
+            if s > best {
+                (best, nearest) = (s, f);
+            }
+        }
+        if best > 0.0 {
+            let mut closest = (f64::INFINITY, *q);
+            for (f, t) in self.triangles.iter().enumerate() {
+                if self.normals[f].dot(q) - self.offsets[f] <= 0.0 {
+                    continue;
+                }
+                let p = closest_on_triangle(
+                    q,
+                    &self.vertices[t[0]],
+                    &self.vertices[t[1]],
+                    &self.vertices[t[2]],
+                );
+                let d2 = (q - p).norm_squared();
+                if d2 < closest.0 {
+                    closest = (d2, p);
+                }
+            }
+            let gap = q - closest.1;
+            let dist = gap.norm();
+            if dist > MIN_NORM && dist.is_finite() {
+                return (dist, closest.1, gap / dist);
+            }
+        }
+        let n = self.normals[nearest];
+        (best, q - best * n, n)
+    }
+}
+
+/// The point of triangle `(a, b, c)` closest to `p` (Ericson, Real-Time Collision Detection,
+/// §5.1.5: by the Voronoi region of `p`).
+fn closest_on_triangle(
+    p: &Vector3<f64>,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: &Vector3<f64>,
+) -> Vector3<f64> {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(&ap), ac.dot(&ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return *a;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(&bp), ac.dot(&bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return *b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(&cp), ac.dot(&cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return *c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    a + ab * (vb * denom) + ac * (vc * denom)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::geometry::{Ball, Feature, GeomPose, Shape, evaluate};
+    use crate::solver::test_rng::Rng;
+
+    /// The box kernel's signed distance of point `q` to the box `half` (its frame).
+    fn box_distance(q: &Vector3<f64>, half: &Vector3<f64>) -> (f64, Vector3<f64>, Vector3<f64>) {
+        let feature = Feature::SphereBox {
+            a: Ball {
+                center: *q,
+                radius: 0.0,
+            },
+            half_extents_b: *half,
+        };
+        let b = Shape::Box {
+            half_extents: *half,
+        };
+        let w = evaluate(
+            &feature,
+            &Shape::Point,
+            &GeomPose::default(),
+            &b,
+            &GeomPose::default(),
+        );
+        (w.phi, w.point_b, w.normal)
+    }
+
+    fn cube_points(half: &Vector3<f64>, extra: bool) -> Vec<Vector3<f64>> {
+        let mut pts = Vec::new();
+        for i in 0..8 {
+            let s = |k: usize| if i >> k & 1 == 1 { 1.0 } else { -1.0 };
+            pts.push(Vector3::new(s(0) * half.x, s(1) * half.y, s(2) * half.z));
+        }
+        if extra {
+            // points inside and on faces: not hull vertices
+            pts.push(Vector3::zeros());
+            pts.push(Vector3::new(half.x, 0.1 * half.y, -0.3 * half.z));
+            pts.push(Vector3::new(0.2 * half.x, -half.y, 0.5 * half.z));
+        }
+        pts
+    }
+
+    /// A box's hull holds its eight corners (and may keep a point lying on a face: coplanar
+    /// points are not merged), the interior point is dropped, and the signed distance to it
+    /// equals the box kernel's (exact closest points outside, nearest face inside) at random
+    /// points.
+    #[test]
+    fn a_box_hull_measures_distances_as_the_box_does() {
+        let half = Vector3::new(0.3, 0.2, 0.1);
+        let hull = ConvexHull::new(&cube_points(&half, true)).unwrap();
+        let pts = cube_points(&half, true);
+        assert!(pts[..8].iter().all(|c| hull.vertices.contains(c)));
+        assert!(!hull.vertices.contains(&Vector3::zeros()) && hull.vertices.len() <= 10);
+        let mut rng = Rng(7);
+        for _ in 0..2000 {
+            let q = Vector3::new(0.6 * rng.next(), 0.4 * rng.next(), 0.3 * rng.next());
+            let (d, p, n) = hull.signed_distance(&q);
+            let (db, pb, nb) = box_distance(&q, &half);
+            assert!((d - db).abs() < 1e-12, "{q:?}: {d} vs {db}");
+            assert!((p - pb).amax() < 1e-12, "{q:?}: {p:?} vs {pb:?}");
+            if d > 1e-9 || db < -1e-9 {
+                assert!(
+                    (n - nb).amax() < 1e-9 || d.abs() < 1e-9,
+                    "{q:?}: {n:?} vs {nb:?}"
+                );
+            }
+        }
+    }
+
+    /// Mass properties of a box hull (shifted and rotated): volume, centre and inertia.
+    #[test]
+    fn mass_properties_of_a_moved_box_hull() {
+        let half = Vector3::new(0.3, 0.2, 0.1);
+        let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.7, 1.1).into_inner();
+        let shift = Vector3::new(0.5, -1.0, 2.0);
+        let pts: Vec<_> = cube_points(&half, true)
+            .iter()
+            .map(|p| rot * p + shift)
+            .collect();
+        let hull = ConvexHull::new(&pts).unwrap();
+        let (v, c, i) = hull.mass_properties();
+        let (a, b, h) = (2.0 * half.x, 2.0 * half.y, 2.0 * half.z);
+        assert!((v - a * b * h).abs() < 1e-14, "{v}");
+        assert!((c - shift).amax() < 1e-12, "{c:?}");
+        let diag =
+            Matrix3::from_diagonal(&Vector3::new(b * b + h * h, a * a + h * h, a * a + b * b))
+                * (v / 12.0);
+        assert!((i - rot * diag * rot.transpose()).amax() < 1e-14, "{i}");
+        // recentred on its principal axes: the box again
+        let back = hull.transformed(&rot.transpose(), &shift);
+        let (_, c2, i2) = back.mass_properties();
+        assert!(c2.amax() < 1e-12 && (i2 - diag).amax() < 1e-14);
+    }
+
+    /// A finer convex mesh (points on a sphere): every input point lies inside or on the hull,
+    /// every hull vertex is an input point, and its volume approaches the sphere's.
+    #[test]
+    fn a_sphere_sampled_hull_contains_its_points() {
+        let mut rng = Rng(3);
+        let pts: Vec<Vector3<f64>> = (0..400)
+            .map(|_| {
+                let v = Vector3::new(rng.next(), rng.next(), rng.next());
+                v.normalize() * 0.5
+            })
+            .collect();
+        let hull = ConvexHull::new(&pts).unwrap();
+        for p in &pts {
+            assert!(hull.signed_distance(p).0 < 1e-12);
+        }
+        for v in &hull.vertices {
+            assert!(pts.iter().any(|p| (p - v).amax() < 1e-14));
+        }
+        let (vol, com, _) = hull.mass_properties();
+        let sphere = 4.0 / 3.0 * std::f64::consts::PI * 0.125;
+        assert!(vol < sphere && vol > 0.9 * sphere, "{vol} vs {sphere}");
+        assert!(com.amax() < 0.02);
+        assert!(ConvexHull::new(&pts[..3]).is_err());
+        let flat: Vec<_> = pts.iter().map(|p| Vector3::new(p.x, p.y, 0.0)).collect();
+        assert!(ConvexHull::new(&flat).is_err());
+    }
+}
