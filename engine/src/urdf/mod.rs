@@ -27,9 +27,11 @@
 //!   so `ctrl` is the joint torque (N·m) or force (N); `ctrlrange = (-effort, effort)` when
 //!   `<limit effort>` is given and positive, otherwise unclamped. Velocity limits are ignored
 //!   (MuJoCo ignores them too).
-//! * Collision primitives box, cylinder, sphere and capsule (`length` = the cylindrical part);
-//!   a collision mesh is an [`Error::Unsupported`] naming the link. Visual elements (meshes
-//!   included) are skipped. Pairs follow MuJoCo's rules (no parent–child contact).
+//! * Collision primitives box, cylinder, sphere and capsule (`length` = the cylindrical part), and
+//!   collision meshes (STL, OBJ; `scale`), which collide as their convex hulls (the MJCF mesh
+//!   geom): `package://NAME/REST` is looked for as `NAME/REST` or `REST` beside the URDF file and
+//!   up to three folders above it (no ROS needed), other names relative to the URDF's folder.
+//!   Visual elements are skipped. Pairs follow MuJoCo's rules (no parent–child contact).
 //! * Ignored with a warning: unknown top-level elements. Ignored silently:
 //!   `material`, `transmission`, `gazebo`, `calibration`, `safety_controller`. `<mimic>` is an
 //!   [`Error::Unsupported`].
@@ -65,7 +67,7 @@ pub fn load_path(path: &Path, floating: bool) -> Result<UrdfModel> {
         line: 0,
         msg: format!("cannot read the file: {e}"),
     })?;
-    load_str(&xml, &source, floating)
+    load(&xml, &source, floating, path.parent())
 }
 
 /// Load URDF text; `source` names it in messages (a path or `<string>`).
@@ -82,12 +84,21 @@ pub fn load_path(path: &Path, floating: bool) -> Result<UrdfModel> {
 /// assert_eq!((m.nq, m.nu()), (1, 1));
 /// ```
 pub fn load_str(xml: &str, source: &str, floating: bool) -> Result<UrdfModel> {
+    load(xml, source, floating, None)
+}
+
+/// [`load_str`] with collision mesh files found from `dir` (none: the working directory).
+fn load(xml: &str, source: &str, floating: bool, dir: Option<&Path>) -> Result<UrdfModel> {
     let doc = Document::parse(xml).map_err(|e| Error::Urdf {
         source_name: source.to_string(),
         line: e.pos().row as usize,
         msg: format!("malformed XML: {e}"),
     })?;
-    let parser = Parser { source, doc: &doc };
+    let parser = Parser {
+        source,
+        doc: &doc,
+        dir,
+    };
     let mut robot = parser.robot()?;
     let (mjcf, lines) = Emitter::new(source, &robot, floating)?.emit()?;
     let loaded = crate::mjcf::load_str(&mjcf, source).map_err(|e| match e {
@@ -193,6 +204,8 @@ struct Emitter<'r> {
     out: String,
     lines: Vec<usize>,
     indent: usize,
+    /// `<mesh>` assets of the collision meshes: (URDF line, element).
+    meshes: Vec<(usize, String)>,
 }
 
 fn fmt3(v: &Vector3<f64>) -> String {
@@ -297,6 +310,7 @@ impl<'r> Emitter<'r> {
             out: String::new(),
             lines: vec![],
             indent: 0,
+            meshes: vec![],
         })
     }
 
@@ -393,6 +407,15 @@ impl<'r> Emitter<'r> {
         }
         self.indent -= 1;
         self.line(1, "</worldbody>");
+        if !self.meshes.is_empty() {
+            self.line(1, "<asset>");
+            self.indent += 1;
+            for (line, text) in std::mem::take(&mut self.meshes) {
+                self.line(line, &text);
+            }
+            self.indent -= 1;
+            self.line(1, "</asset>");
+        }
         let motors: Vec<usize> = (0..self.robot.joints.len())
             .filter(|&j| {
                 matches!(
@@ -603,9 +626,25 @@ impl<'r> Emitter<'r> {
                         half_length,
                     } => ("capsule", format!("{radius} {half_length}")),
                     Primitive::Sphere(r) => ("sphere", format!("{r}")),
+                    Primitive::Mesh {
+                        ref path,
+                        scale: [x, y, z],
+                    } => {
+                        let name = esc(&format!("{}_collision{k}", l.name));
+                        let file = esc(&path.display().to_string());
+                        let text = format!(
+                            "<mesh name=\"{name}\" file=\"{file}\" scale=\"{x} {y} {z}\"/>"
+                        );
+                        self.meshes.push((c.line, text));
+                        ("mesh", String::new())
+                    }
+                };
+                let shape = match kind {
+                    "mesh" => format!("mesh=\"{}\"", esc(&format!("{}_collision{k}", l.name))),
+                    _ => format!("size=\"{size}\""),
                 };
                 let text = format!(
-                    "<geom name=\"{}\" type=\"{kind}\" size=\"{size}\" pos=\"{}\" quat=\"{}\"/>",
+                    "<geom name=\"{}\" type=\"{kind}\" {shape} pos=\"{}\" quat=\"{}\"/>",
                     esc(&format!("{}_collision{k}", l.name)),
                     fmt3(&t.pos),
                     fmt_quat(&t.rot)
@@ -678,13 +717,14 @@ mod tests {
         let bad = ARM.replace("type=\"fixed\"", "type=\"weird\"");
         let e = load_str(&bad, "<arm>", false).unwrap_err().to_string();
         assert!(e.contains("<arm>:14") && e.contains("weird"), "{e}");
+        // a collision mesh's package not found: the link, the file and where it was looked for
         let mesh = ARM.replace(
             "<capsule radius=\"0.05\" length=\"0.4\"/>",
-            "<mesh filename=\"x.stl\"/>",
+            "<mesh filename=\"package://arm_description/meshes/x.stl\"/>",
         );
-        let e = load_str(&mesh, "<arm>", false).unwrap_err();
+        let e = load_str(&mesh, "<arm>", false).unwrap_err().to_string();
         assert!(
-            matches!(e, Error::Unsupported(_)) && e.to_string().contains("\"upper\""),
+            e.contains("\"upper\"") && e.contains("arm_description") && e.contains("tried"),
             "{e}"
         );
         let massless = ARM

@@ -1,4 +1,6 @@
 //! URDF elements → plain structs (links, joints), every value checked and every error located.
+use std::path::{Path, PathBuf};
+
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use roxmltree::{Document, Node};
 
@@ -40,9 +42,20 @@ pub(super) struct Inertial {
 #[derive(Clone, Debug)]
 pub(super) enum Primitive {
     Box([f64; 3]),
-    Cylinder { radius: f64, half_length: f64 },
+    Cylinder {
+        radius: f64,
+        half_length: f64,
+    },
     Sphere(f64),
-    Capsule { radius: f64, half_length: f64 },
+    Capsule {
+        radius: f64,
+        half_length: f64,
+    },
+    /// A mesh file (resolved) and its scale: collides as its convex hull.
+    Mesh {
+        path: PathBuf,
+        scale: [f64; 3],
+    },
 }
 
 #[derive(Clone, Debug)]
@@ -98,6 +111,8 @@ pub(super) struct Robot {
 pub(super) struct Parser<'s> {
     pub source: &'s str,
     pub doc: &'s Document<'s>,
+    /// The URDF file's folder (mesh files are found from it; none: the working directory).
+    pub dir: Option<&'s Path>,
 }
 
 impl Parser<'_> {
@@ -286,13 +301,16 @@ impl Parser<'_> {
             },
             "sphere" => Primitive::Sphere(self.positive(shape_node, "radius")?),
             "mesh" => {
-                return Err(Error::Unsupported(format!(
-                    "URDF {}:{}: link {link:?}: collision mesh {:?} (replace it by primitives, or \
-                     move it to <visual>)",
-                    self.source,
-                    self.line(shape_node),
-                    shape_node.attribute("filename").unwrap_or("")
-                )));
+                let file = shape_node
+                    .attribute("filename")
+                    .ok_or_else(|| self.err(shape_node, "attribute `filename` is required"))?;
+                let scale = self.nums(shape_node, "scale", 3)?.unwrap_or(vec![1.0; 3]);
+                let path = resolve_mesh(file, self.dir)
+                    .map_err(|e| self.err(shape_node, format!("link {link:?}: {e}")))?;
+                Primitive::Mesh {
+                    path,
+                    scale: [scale[0], scale[1], scale[2]],
+                }
             }
             other => {
                 return Err(self.err(
@@ -422,4 +440,34 @@ pub(super) fn children<'a, 'i>(
 ) -> impl Iterator<Item = Node<'a, 'i>> {
     node.children()
         .filter(move |n| n.is_element() && n.tag_name().name() == tag)
+}
+
+/// A URDF mesh file name as a path: `package://NAME/REST` (ROS's package lookup, done without
+/// ROS) is the first of `NAME/REST` and `REST` that exists beside the URDF file or up to three
+/// folders above it; `file://PATH` is `PATH`; anything else is relative to the URDF's folder.
+fn resolve_mesh(file: &str, dir: Option<&Path>) -> std::result::Result<PathBuf, String> {
+    let base = dir.unwrap_or(Path::new(""));
+    if let Some(rest) = file.strip_prefix("package://") {
+        let (package, sub) = rest.split_once('/').unwrap_or((rest, ""));
+        let mut tried = Vec::new();
+        let mut folder = Some(base);
+        for _ in 0..4 {
+            let Some(d) = folder else { break };
+            for candidate in [d.join(package).join(sub), d.join(sub)] {
+                if candidate.is_file() {
+                    return Ok(candidate);
+                }
+                tried.push(candidate.display().to_string());
+            }
+            folder = d.parent();
+        }
+        return Err(format!(
+            "mesh {file:?}: package {package:?} not found (tried {})",
+            tried.join(", ")
+        ));
+    }
+    Ok(match file.strip_prefix("file://") {
+        Some(path) => PathBuf::from(path),
+        None => base.join(file),
+    })
 }
