@@ -170,3 +170,36 @@ def test_visual_meshes_are_not_read():
     assert m.body_mass[1] == 1.0
     with pytest.raises(ukemi.MjcfError, match=r"absent\.stl"):
         ukemi.Model.from_xml_string(xml.replace(' contype="0" conaffinity="0"', ""))
+
+
+def test_builder_mesh_geoms_are_convex_hulls():
+    """`ModelBuilder.add_geom(shape="mesh", vertices=...)`: a rock dropped on the floor comes
+    to rest on a face of its hull, its lowest vertex on the floor (not below it: 1e-8), the
+    interior point not a contact; a flat or missing vertex list, or vertices on another shape,
+    is a ValueError naming the geom."""
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("floor", body="world", shape="plane")
+    b.add_body("rock", mass=0.99, inertia=(2e-3, 1.7e-3, 2e-3), pos=(0, 0, 0.3))
+    b.add_joint("free", kind="floating", parent="world", child="rock")
+    b.add_geom("rock", body="rock", shape="mesh", vertices=np.array(ROCK))
+    m = b.compile()
+    s = m.make_state()
+    for _ in range(100):
+        s, info = ukemi.step(m, s, np.zeros(0))
+        assert info.converged
+    # at rest on its lowest face: some hull vertex touches the floor, none is below it
+    rot = np.array(s.body_quat[1])
+    w, x, y, z = rot
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    heights = (np.array(s.body_pos[1]) + np.array(ROCK) @ R.T)[:, 2]
+    assert -1e-8 < heights.min() < 1e-6 and np.abs(s.qvel).max() < 1e-6, heights.min()
+    for kwargs, match in [(dict(shape="mesh"), "vertices"),
+                          (dict(shape="mesh", vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0],
+                                                        [1, 1, 0]]), "rock2"),
+                          (dict(shape="sphere", size=(0.1,), vertices=ROCK), "vertices")]:
+        b2 = ukemi.ModelBuilder()
+        b2.add_body("rock", mass=1.0, inertia=(1, 1, 1))
+        with pytest.raises(ValueError, match=match):
+            b2.add_geom("rock2", body="rock", **kwargs)

@@ -124,9 +124,15 @@ impl PyModelBuilder {
         contact: Option<&str>,
         contype: u32,
         conaffinity: u32,
+        vertices: Option<Vec<[f64; 3]>>,
     ) -> PyResult<()> {
         let bad =
             |what: String| ModelError::new_err(format!("invalid model: `geom[{name}].{what}"));
+        if vertices.is_some() && shape != "mesh" {
+            return Err(bad(format!(
+                "vertices`: apply to shape \"mesh\" only, not {shape:?}"
+            )));
+        }
         let need = |n: usize| -> PyResult<()> {
             if size.len() < n {
                 return Err(bad(format!(
@@ -168,9 +174,19 @@ impl PyModelBuilder {
                     radii: Vector3::new(size[0], size[1], size[2]),
                 }
             }
+            "mesh" => {
+                let points: Vec<Vector3<f64>> = (vertices.iter().flatten())
+                    .map(|v| Vector3::from(*v))
+                    .collect();
+                let hull = ukemi_engine::contact::geometry::ConvexHull::new(&points)
+                    .map_err(|e| bad(format!("vertices`: {e}")))?;
+                Shape::Mesh {
+                    hull: std::sync::Arc::new(hull),
+                }
+            }
             other => {
                 return Err(bad(format!(
-                    "shape` = {other:?}: expected one of plane, sphere, capsule, box, cylinder, ellipsoid, point"
+                    "shape` = {other:?}: expected one of plane, sphere, capsule, box, cylinder, ellipsoid, mesh, point"
                 )));
             }
         };

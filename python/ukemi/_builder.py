@@ -164,14 +164,14 @@ class ModelBuilder:
 
     def add_geom(self, name: str, body: str, shape: str, size=(), pos=(0.0, 0.0, 0.0),
                  quat=(1.0, 0.0, 0.0, 0.0), friction: float = 0.5, contact: str | None = "nonlinear",
-                 normal=None, contype: int = 1, conaffinity: int = 1) -> None:
+                 normal=None, contype: int = 1, conaffinity: int = 1, vertices=None) -> None:
         """Add a collision geometry to ``body`` (``"world"`` for static geometry).
 
         Args:
             name: Unique name.
             body: Body name.
             shape: ``"plane"``, ``"sphere"``, ``"capsule"``, ``"box"``, ``"cylinder"``,
-                ``"ellipsoid"`` or ``"point"``.
+                ``"ellipsoid"``, ``"mesh"`` or ``"point"``.
             size: MuJoCo's sizes: sphere (radius,), capsule and cylinder (radius, half-length
                 along the geom z axis), box (three half-extents), ellipsoid (three radii); plane
                 and point take none.
@@ -183,6 +183,8 @@ class ModelBuilder:
                 (frictionless) or None (never collides). A pair is frictionless if either geom
                 says ``"impact"`` or its friction is 0, else linear if either says ``"linear"``.
             contype, conaffinity: MuJoCo's collision bitmasks.
+            vertices: Mesh only: (N, 3) points in the geom frame (m); the geom is their convex
+                hull (as MuJoCo collides a mesh), touching other shapes at the hull's vertices.
         """
         if not isinstance(shape, str):
             raise TypeError(f"`shape` must be a string, got {type(shape).__name__}")
@@ -193,9 +195,14 @@ class ModelBuilder:
                 raise ValueError(f"geom[{name}]: `normal` applies to planes only, not {shape!r}")
             quat = _quat_z_to(as_float_array("normal", normal, (3,)))
         size_list = as_float_array("size", size).ravel().tolist()
+        if (vertices is None) == (shape == "mesh"):
+            raise ValueError(f"geom[{name}]: `vertices` are given for a mesh and only for a mesh "
+                             f"(shape {shape!r})")
+        points = None if vertices is None else as_float_array("vertices", vertices, (-1, 3))
         self._b.add_geom(str(name), str(body), shape, size_list, as_vector("pos", pos, 3),
                          as_vector("quat", quat, 4), as_scalar("friction", friction), contact,
-                         _bits("contype", contype), _bits("conaffinity", conaffinity))
+                         _bits("contype", contype), _bits("conaffinity", conaffinity),
+                         None if points is None else points.tolist())
 
     def add_tendon_limit(self, name: str, terms, range) -> None:
         """Limit a fixed tendon (MuJoCo's limited ``<tendon><fixed>``): ``lo <= Σ coef·q <= hi``.
