@@ -53,36 +53,20 @@ impl ConvexHull {
             )
         })?;
         let (pts, flat) = hull.vertices_indices();
-        // each hull point is a copy of one unit point: back to the input point, bit for bit
+        // each hull point is a copy of one unit point: back to the input point's index
         let key = |p: &[f64]| [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()];
         let input: std::collections::HashMap<[u64; 3], usize> =
             unit.iter().enumerate().map(|(i, p)| (key(p), i)).collect();
-        let vertices: Vec<Vector3<f64>> = pts
+        let index: Vec<usize> = pts
             .iter()
-            .map(|p| match input.get(&key(p)) {
-                Some(&i) => points[i],
-                None => Vector3::new(p[0], p[1], p[2]) * scale + center,
-            })
+            .map(|p| input.get(&key(p)).copied())
+            .collect::<Option<_>>()
+            .ok_or("the hull library returned a point that is not an input point")?;
+        let triangles: Vec<[usize; 3]> = flat
+            .chunks_exact(3)
+            .map(|t| [index[t[0]], index[t[1]], index[t[2]]])
             .collect();
-        let inside = vertices
-            .iter()
-            .fold(Vector3::zeros(), |s: Vector3<f64>, p| s + p)
-            / vertices.len() as f64;
-        let mut triangles = Vec::with_capacity(flat.len() / 3);
-        for t in flat.chunks_exact(3) {
-            let (a, b, c) = (vertices[t[0]], vertices[t[1]], vertices[t[2]]);
-            let n = (b - a).cross(&(c - a));
-            // (slivers of coplanar points carry no face)
-            if n.norm() <= 1e-14 * scale * scale {
-                continue;
-            }
-            // outward: away from a point inside
-            triangles.push(if n.dot(&(a - inside)) >= 0.0 {
-                [t[0], t[1], t[2]]
-            } else {
-                [t[0], t[2], t[1]]
-            });
-        }
+        let (vertices, triangles) = canonical(points, &triangles, scale);
         let mut out = ConvexHull {
             vertices,
             triangles,
@@ -197,6 +181,92 @@ impl ConvexHull {
     }
 }
 
+/// The hull's vertices and triangles made independent of the order the hull library found its
+/// facets in (it iterates hash sets, so its order changes from process to process, and with it
+/// the candidates' order and a chaotic pile's trajectory): coplanar triangles are merged into
+/// faces; the corners of the polytope are kept (a point inside a face or on an edge is not a
+/// vertex: it lies on fewer than three independent face planes); each face's corners are
+/// ordered counter-clockwise seen from outside, from the lowest input index, and fanned into
+/// triangles; vertices come in input order and faces by their corners.
+fn canonical(
+    points: &[Vector3<f64>],
+    triangles: &[[usize; 3]],
+    scale: f64,
+) -> (Vec<Vector3<f64>>, Vec<[usize; 3]>) {
+    let mut used: Vec<usize> = triangles.iter().flatten().copied().collect();
+    used.sort_unstable();
+    used.dedup();
+    let inside = used
+        .iter()
+        .fold(Vector3::zeros(), |s: Vector3<f64>, &i| s + points[i])
+        / used.len().max(1) as f64;
+    // faces: outward unit normal, offset, the points on it
+    let mut faces: Vec<(Vector3<f64>, f64, Vec<usize>)> = Vec::new();
+    for t in triangles {
+        let (a, b, c) = (points[t[0]], points[t[1]], points[t[2]]);
+        let n = (b - a).cross(&(c - a));
+        // (slivers of coplanar points carry no face)
+        if n.norm() <= 1e-14 * scale * scale {
+            continue;
+        }
+        let n = if n.dot(&(a - inside)) >= 0.0 { n } else { -n }.normalize();
+        let d = n.dot(&a);
+        match (faces.iter_mut()).find(|f| (f.0 - n).amax() < 1e-9 && (f.1 - d).abs() < 1e-9 * scale)
+        {
+            Some(f) => f.2.extend_from_slice(t),
+            None => faces.push((n, d, t.to_vec())),
+        }
+    }
+    // a corner lies on three faces whose normals span space
+    let on = |i: usize| faces.iter().filter(move |f| f.2.contains(&i)).map(|f| f.0);
+    let corner = |i: usize| {
+        let normals: Vec<Vector3<f64>> = on(i).collect();
+        (0..normals.len()).any(|x| {
+            (x + 1..normals.len()).any(|y| {
+                (y + 1..normals.len())
+                    .any(|z| normals[x].dot(&normals[y].cross(&normals[z])).abs() > 1e-9)
+            })
+        })
+    };
+    let corners: Vec<usize> = used.iter().copied().filter(|&i| corner(i)).collect();
+    let mut polygons: Vec<Vec<usize>> = Vec::new();
+    for (n, _, members) in &faces {
+        let mut ring: Vec<usize> = corners
+            .iter()
+            .copied()
+            .filter(|i| members.contains(i))
+            .collect();
+        if ring.len() < 3 {
+            continue;
+        }
+        let c = ring
+            .iter()
+            .fold(Vector3::zeros(), |s: Vector3<f64>, &i| s + points[i])
+            / ring.len() as f64;
+        let u = (points[ring[0]] - c).normalize();
+        let v = n.cross(&u);
+        let angle = |i: usize| {
+            let r = points[i] - c;
+            r.dot(&v).atan2(r.dot(&u))
+        };
+        ring.sort_by(|&a, &b| angle(a).total_cmp(&angle(b)).then(a.cmp(&b)));
+        let first = (0..ring.len()).min_by_key(|&k| ring[k]).unwrap_or(0);
+        ring.rotate_left(first);
+        polygons.push(ring);
+    }
+    polygons.sort();
+    let position = |i: usize| corners.binary_search(&i).unwrap_or(0);
+    let vertices = corners.iter().map(|&i| points[i]).collect();
+    let triangles = polygons
+        .iter()
+        .flat_map(|ring| {
+            (1..ring.len() - 1)
+                .map(move |k| [position(ring[0]), position(ring[k]), position(ring[k + 1])])
+        })
+        .collect();
+    (vertices, triangles)
+}
+
 /// The point of triangle `(a, b, c)` closest to `p` (Ericson, Real-Time Collision Detection,
 /// §5.1.5: by the Voronoi region of `p`).
 fn closest_on_triangle(
@@ -279,17 +349,16 @@ mod tests {
         pts
     }
 
-    /// A box's hull holds its eight corners (and may keep a point lying on a face: coplanar
-    /// points are not merged), the interior point is dropped, and the signed distance to it
+    /// A box's hull is its eight corners in input order (the interior point and the points
+    /// on a face are not vertices; each face is two triangles), and the signed distance to it
     /// equals the box kernel's (exact closest points outside, nearest face inside) at random
     /// points.
     #[test]
     fn a_box_hull_measures_distances_as_the_box_does() {
         let half = Vector3::new(0.3, 0.2, 0.1);
         let hull = ConvexHull::new(&cube_points(&half, true)).unwrap();
-        let pts = cube_points(&half, true);
-        assert!(pts[..8].iter().all(|c| hull.vertices.contains(c)));
-        assert!(!hull.vertices.contains(&Vector3::zeros()) && hull.vertices.len() <= 10);
+        assert_eq!(hull.vertices, cube_points(&half, false));
+        assert_eq!(hull.triangles.len(), 12);
         let mut rng = Rng(7);
         for _ in 0..2000 {
             let q = Vector3::new(0.6 * rng.next(), 0.4 * rng.next(), 0.3 * rng.next());
@@ -304,6 +373,35 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The hull does not depend on the order the quickhull library meets its facets in (it
+    /// iterates hash sets seeded per set): built again and again from the same points, and from
+    /// the points' mirror order, it is the same, bit for bit.
+    #[test]
+    fn a_hull_is_the_same_every_time() {
+        let mut rng = Rng(11);
+        let pts: Vec<Vector3<f64>> = (0..60)
+            .map(|_| Vector3::new(rng.next(), 0.7 * rng.next(), 0.4 * rng.next()))
+            .chain(cube_points(&Vector3::new(0.5, 0.5, 0.5), true))
+            .collect();
+        let first = ConvexHull::new(&pts).unwrap();
+        for _ in 0..20 {
+            assert_eq!(ConvexHull::new(&pts).unwrap(), first);
+        }
+        let mut reversed = pts.clone();
+        reversed.reverse();
+        let other = ConvexHull::new(&reversed).unwrap();
+        let mut a = first.vertices.clone();
+        let mut b = other.vertices.clone();
+        let order =
+            |x: &Vector3<f64>, y: &Vector3<f64>| x.as_slice().partial_cmp(y.as_slice()).unwrap();
+        a.sort_by(order);
+        b.sort_by(order);
+        assert_eq!(a, b);
+        let (va, ca, ia) = first.mass_properties();
+        let (vb, cb, ib) = other.mass_properties();
+        assert!((va - vb).abs() < 1e-15 && (ca - cb).amax() < 1e-15 && (ia - ib).amax() < 1e-15);
     }
 
     /// Mass properties of a box hull (shifted and rotated): volume, centre and inertia.
