@@ -337,10 +337,30 @@ def test_not_a_robot_and_broken_xml():
         ukemi.Model.from_urdf_path("/nonexistent/robot.urdf")
 
 
-def test_mimic_is_unsupported():
-    bad = ARM.replace("<limit effort=\"10\"", '<mimic joint="shoulder"/><limit effort="10"')
-    with pytest.raises(ukemi.UnsupportedError, match="mimic"):
-        load_urdf(bad, floating=False)
+def test_mimic_joint_follows_its_leader():
+    """`<mimic joint multiplier offset>` couples the elbow to the shoulder, q_elbow = -2
+    q_shoulder + 0.1, as a hard joint equality: along a rollout under random shoulder torques
+    the coupling holds to the solver's tolerance while both joints move; the mimic joint has
+    no motor of its own; a leader that does not exist is named with the mimic's line."""
+    mimic = '<mimic joint="shoulder" multiplier="-2" offset="0.1"/><limit effort="10"'
+    coupled = ARM.replace('<limit effort="10"', mimic)
+    assert coupled != ARM
+    m = load_urdf(coupled, floating=False)
+    free = load_urdf(ARM, floating=False)
+    assert m.nu == free.nu - 1 and list(m.actuator_names) == ["shoulder"]
+    s = m.make_state(qpos=[0.2, -0.3])
+    rng = np.random.default_rng(0)
+    qs = []
+    for u in rng.uniform(-20, 20, (100, 1)):
+        s, info = ukemi.step(m, s, u)
+        assert info.converged
+        qs.append(np.array(s.qpos))
+    qs = np.array(qs)
+    np.testing.assert_allclose(qs[:, 1], -2 * qs[:, 0] + 0.1, atol=1e-9)
+    assert np.ptp(qs[:, 0]) > 0.1
+    unknown = coupled.replace('<mimic joint="shoulder"', '<mimic joint="hip"')
+    with pytest.raises(ukemi.UrdfError, match=rf"<string>:{line_of(coupled, '<mimic')}:.*hip"):
+        load_urdf(unknown, floating=False)
 
 
 def test_dynamics_friction_is_dry_joint_friction():
@@ -396,3 +416,26 @@ def test_fuzzed_urdf_raises_only_ukemi_errors():
             load_urdf("".join(text), floating=bool(rng.integers(2)))
         except (ukemi.UrdfError, ukemi.UnsupportedError, ukemi.ModelError, ukemi.MjcfError):
             pass
+
+
+def test_ros_conventions_a_world_root_and_axes_of_fixed_joints():
+    """Two conventions of ROS robots (pybullet's Panda and xArm URDFs use them): a root link
+    named `world` is the world frame, so the robot is fixed to it even when a floating base is
+    asked for; a fixed joint's axis is ignored, zero or not (the URDF spec ignores it)."""
+    fixed = load_urdf(ARM, floating=False)
+    zero_axis = ARM.replace('<origin xyz="0.4 0 0" rpy="0.2 0.7 -0.4"/>',
+                            '<origin xyz="0.4 0 0" rpy="0.2 0.7 -0.4"/><axis xyz="0 0 0"/>')
+    assert zero_axis != ARM
+    m = load_urdf(zero_axis, floating=False)
+    np.testing.assert_array_equal(m.body_mass, fixed.body_mass)
+    world = ARM.replace('<link name="base">', '<link name="world"/>\n  <link name="base">', 1)
+    world = world.replace('<joint name="shoulder"', '<joint name="pin" type="fixed"><parent '
+                          'link="world"/><child link="base"/></joint>\n  <joint name="shoulder"')
+    m = load_urdf(world, floating=True)
+    assert (m.nq, m.nv) == (fixed.nq, fixed.nv) == (2, 2)
+    s = m.make_state(qpos=[0.3, -0.2])
+    t = fixed.make_state(qpos=[0.3, -0.2])
+    for _ in range(20):
+        s, _ = ukemi.step(m, s, [1.0, -0.5])
+        t, _ = ukemi.step(fixed, t, [1.0, -0.5])
+    np.testing.assert_allclose(s.qpos, t.qpos, atol=1e-12)

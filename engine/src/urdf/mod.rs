@@ -22,9 +22,13 @@
 //!   collision geoms move onto the parent. The merged link keeps the parent's name.
 //! * Base: `floating = true` gives the root link a free joint (`qpos` starts with
 //!   `[x, y, z, qw, qx, qy, qz]`); `floating = false` welds it (and everything fixed to it) to the
-//!   world, whose mass is then irrelevant.
-//! * Actuators: one motor per revolute, continuous and prismatic joint, named after it, gear 1,
-//!   so `ctrl` is the joint torque (N·m) or force (N); `ctrlrange = (-effort, effort)` when
+//!   world, whose mass is then irrelevant. A root link named `world` (ROS's convention for a robot
+//!   fixed in place) is the world whatever `floating` says.
+//! * The axis of a fixed or floating joint is ignored (as the URDF spec says; robots carry zero
+//!   ones there).
+//! * Actuators: one motor per revolute, continuous and prismatic joint (but a `<mimic>` one),
+//!   named after it, gear 1, so `ctrl` is the joint torque (N·m) or force (N);
+//!   `ctrlrange = (-effort, effort)` when
 //!   `<limit effort>` is given and positive, otherwise unclamped. Velocity limits are ignored
 //!   (MuJoCo ignores them too).
 //! * Collision primitives box, cylinder, sphere and capsule (`length` = the cylindrical part), and
@@ -33,8 +37,9 @@
 //!   up to three folders above it (no ROS needed), other names relative to the URDF's folder.
 //!   Visual elements are skipped. Pairs follow MuJoCo's rules (no parent–child contact).
 //! * Ignored with a warning: unknown top-level elements. Ignored silently:
-//!   `material`, `transmission`, `gazebo`, `calibration`, `safety_controller`. `<mimic>` is an
-//!   [`Error::Unsupported`].
+//!   `material`, `transmission`, `gazebo`, `calibration`, `safety_controller`.
+//! * `<mimic joint multiplier offset>`: the joint follows its leader, `q = multiplier q_leader +
+//!   offset`, as a hard coupling (MJCF `equality/joint`); it gets no motor of its own.
 //! * Options: MuJoCo's defaults (time step 0.002 s, gravity −9.81 z); change them with
 //!   [`Model::with_options`].
 mod parse;
@@ -298,6 +303,8 @@ impl<'r> Emitter<'r> {
                 ));
             }
         };
+        // a root link named "world" is ROS's world frame: the robot is fixed to it
+        let floating = floating && robot.links[root].name != "world";
         Ok(Emitter {
             source,
             robot,
@@ -416,12 +423,34 @@ impl<'r> Emitter<'r> {
             self.indent -= 1;
             self.line(1, "</asset>");
         }
+        // a mimic joint follows its leader (an equality), driven by the leader's motor
+        let mimics: Vec<usize> = (0..self.robot.joints.len())
+            .filter(|&j| self.robot.joints[j].mimic.is_some())
+            .collect();
+        if !mimics.is_empty() {
+            self.line(1, "<equality>");
+            self.indent += 1;
+            for j in mimics {
+                let joint = &self.robot.joints[j];
+                let Some(m) = &joint.mimic else { continue };
+                let text = format!(
+                    "<joint joint1=\"{}\" joint2=\"{}\" polycoef=\"{} {} 0 0 0\"/>",
+                    esc(&joint.name),
+                    esc(&m.leader),
+                    m.offset,
+                    m.multiplier
+                );
+                self.line(m.line, &text);
+            }
+            self.indent -= 1;
+            self.line(1, "</equality>");
+        }
         let motors: Vec<usize> = (0..self.robot.joints.len())
             .filter(|&j| {
                 matches!(
                     self.robot.joints[j].kind,
                     JointType::Revolute | JointType::Continuous | JointType::Prismatic
-                )
+                ) && self.robot.joints[j].mimic.is_none()
             })
             .collect();
         if !motors.is_empty() {

@@ -99,6 +99,17 @@ pub(super) struct Joint {
     pub damping: f64,
     /// `<dynamics friction>`: Coulomb (dry) joint friction, N·m or N.
     pub friction: f64,
+    /// `<mimic>`: this joint follows another.
+    pub mimic: Option<Mimic>,
+}
+
+/// `<mimic joint multiplier offset>`: `q = multiplier q_leader + offset`.
+#[derive(Clone, Debug)]
+pub(super) struct Mimic {
+    pub leader: String,
+    pub multiplier: f64,
+    pub offset: f64,
+    pub line: usize,
 }
 
 #[derive(Debug)]
@@ -357,7 +368,9 @@ impl Parser<'_> {
         };
         let (parent, child) = (link_of("parent")?, link_of("child")?);
         let origin = self.origin(node)?;
-        let axis = match children(node, "axis").next() {
+        // (the URDF spec ignores the axis of fixed and floating joints: robots carry zero ones)
+        let moves_along_axis = !matches!(kind, JointType::Fixed | JointType::Floating);
+        let axis = match children(node, "axis").next().filter(|_| moves_along_axis) {
             Some(a) => {
                 let v = self
                     .nums(a, "xyz", 3)?
@@ -411,12 +424,29 @@ impl Parser<'_> {
                 return Err(self.err(d, msg));
             }
         }
+        // `q = multiplier q_leader + offset` (an MJCF joint equality)
+        let mut mimic = None;
         if let Some(m) = children(node, "mimic").next() {
-            return Err(Error::Unsupported(format!(
-                "URDF {}:{}: joint {name:?}: <mimic> (joint coupling) is not supported",
-                self.source,
-                self.line(m)
-            )));
+            let leader = m
+                .attribute("joint")
+                .ok_or_else(|| self.err(m, "attribute `joint` is required"))?;
+            let multiplier = self.num(m, "multiplier")?.unwrap_or(1.0);
+            let offset = self.num(m, "offset")?.unwrap_or(0.0);
+            if !matches!(
+                kind,
+                JointType::Revolute | JointType::Continuous | JointType::Prismatic
+            ) {
+                return Err(self.err(
+                    m,
+                    format!("joint {name:?}: <mimic> on a joint that is not a hinge or a slide"),
+                ));
+            }
+            mimic = Some(Mimic {
+                leader: leader.to_string(),
+                multiplier,
+                offset,
+                line: self.line(m),
+            });
         }
         Ok(Joint {
             name,
@@ -430,6 +460,7 @@ impl Parser<'_> {
             effort,
             damping,
             friction,
+            mimic,
         })
     }
 }
