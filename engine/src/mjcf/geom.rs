@@ -141,7 +141,7 @@ pub(super) fn parse_geom<'a, 'i>(
     // a mesh: its hull, placed at the mesh's principal frame, and the solid hull's mass (read
     // only where the geom collides or its mass sets its body's: visual meshes, often large
     // files, are not read)
-    let mut hull = None;
+    let (mut hull, mut mesh_mass) = (None, None);
     let collides = !(contype == 0 && conaffinity == 0) || ctx.paired.contains(&name);
     let weighs = wants_mass
         && match ctx.compiler.inertia_from_geom {
@@ -160,23 +160,11 @@ pub(super) fn parse_geom<'a, 'i>(
         hull = Some(mesh.hull.clone());
         if weighs {
             let rho = mass_attr.map_or(density, |m| m / mesh.volume);
-            return Ok(GeomDef {
-                mass_unsupported: false,
-                name,
-                line,
-                kind,
-                size,
-                frame,
-                contype,
-                conaffinity,
-                condim,
-                friction,
-                mass: Some((rho * mesh.volume, mesh.moments * rho)),
-                hull,
-            });
+            mesh_mass = Some((rho * mesh.volume, mesh.moments * rho));
         }
     }
     let mass = match unit_inertia(&kind, &size) {
+        _ if mesh_mass.is_some() => mesh_mass,
         Some((vol, unit)) if wants_mass => {
             if size.iter().take(size_count(&kind)).any(|s| *s <= 0.0) {
                 return Err(ctx.err(
