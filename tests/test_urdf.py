@@ -277,8 +277,9 @@ SWING = """<robot name="swing">
     <geometry>{shape}</geometry></collision></link>
   <joint name="shoulder" type="continuous"><parent link="base"/><child link="arm"/>
     <axis xyz="0 1 0"/></joint>
-  <joint name="wrist" type="fixed"><parent link="arm"/><child link="paddle"/>
-    <origin xyz="0.35 0 0"/></joint>
+  <joint name="wrist" type="revolute"><parent link="arm"/><child link="paddle"/>
+    <origin xyz="0.35 0 0"/><axis xyz="0 1 0"/><limit lower="-0.001" upper="0.001" effort="1"/>
+  </joint>
 </robot>"""
 
 
@@ -294,7 +295,8 @@ def ascii_stl(points):
 def test_collision_mesh_from_a_package_steps_as_its_primitive(tmp_path):
     """A URDF collision mesh (`package://` resolved without ROS, beside the URDF's folder) is
     the convex hull of its vertices: a paddle whose mesh is a box's eight corners swings down
-    onto a table as the same paddle with a `<box>` (to 1e-7 over 0.6 s), stopped by it; a
+    onto a table as the same paddle with a `<box>` (to 1e-7 over 0.6 s), stopped by it (the
+    paddle hangs on a stiff wrist: a link jointed to the base does not collide with it); a
     package that is nowhere names where it was looked for."""
     half = (0.05, 0.04, 0.02)
     corners = [(sx * half[0], sy * half[1], sz * half[2])
@@ -311,8 +313,8 @@ def test_collision_mesh_from_a_package_steps_as_its_primitive(tmp_path):
     a, b = m.with_options(timestep=0.005), box.with_options(timestep=0.005)
     sa, sb = a.make_state(), b.make_state()
     for _ in range(120):
-        sa, ia = ukemi.step(a, sa, [0.0])
-        sb, ib = ukemi.step(b, sb, [0.0])
+        sa, ia = ukemi.step(a, sa, [0.0, 0.0])
+        sb, ib = ukemi.step(b, sb, [0.0, 0.0])
         assert ia.converged and ib.converged
     np.testing.assert_allclose(sa.qpos, sb.qpos, atol=1e-7)
     assert 0.3 < sb.qpos[0] < 1.0 and abs(sb.qvel[0]) < 1e-6  # resting on the table
@@ -439,3 +441,28 @@ def test_ros_conventions_a_world_root_and_axes_of_fixed_joints():
         s, _ = ukemi.step(m, s, [1.0, -0.5])
         t, _ = ukemi.step(fixed, t, [1.0, -0.5])
     np.testing.assert_allclose(s.qpos, t.qpos, atol=1e-12)
+
+
+def test_links_jointed_to_a_fixed_base_do_not_collide_with_it():
+    """MuJoCo's pair rules let the world collide with its children; a fixed URDF base is the
+    world, and its jointed child overlaps it at the joint (pybullet_data's KUKA iiwa sinks 1 cm
+    into its base and jammed its first step): that pair is excluded, the grandchild still
+    collides with the base."""
+    urdf = """<robot name="r">
+      <link name="base"><collision><geometry><box size="0.2 0.2 0.2"/></geometry></collision>
+      </link>
+      <link name="l1"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/>
+        </inertial><collision><geometry><box size="0.1 0.1 0.3"/></geometry></collision></link>
+      <link name="l2"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/>
+        </inertial><collision><origin xyz="0 0 0.2"/><geometry><sphere radius="0.05"/>
+        </geometry></collision></link>
+      <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+        <origin xyz="0 0 0.15"/><axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="5"/></joint>
+      <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+        <origin xyz="0 0 0.15"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="5"/></joint>
+    </robot>"""
+    m = load_urdf(urdf, floating=False)
+    pairs = {tuple(sorted(p[:2])) for p in m.contact_pairs}
+    assert ("base_collision0", "l1_collision0") not in pairs
+    assert ("base_collision0", "l2_collision0") in pairs
+    assert '<exclude body1="world" body2="l1"/>' in ukemi.Model.urdf_to_mjcf(urdf, floating=False)

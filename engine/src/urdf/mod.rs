@@ -35,7 +35,10 @@
 //!   collision meshes (STL, OBJ; `scale`), which collide as their convex hulls (the MJCF mesh
 //!   geom): `package://NAME/REST` is looked for as `NAME/REST` or `REST` beside the URDF file and
 //!   up to three folders above it (no ROS needed), other names relative to the URDF's folder.
-//!   Visual elements are skipped. Pairs follow MuJoCo's rules (no parent–child contact).
+//!   Visual elements are skipped. Pairs follow MuJoCo's rules (no parent–child contact), and
+//!   with a base welded to the world its jointed children do not collide with it either (MuJoCo
+//!   lets the world collide with its children; jointed links overlap at their joints: a KUKA
+//!   iiwa's first link sinks 1 cm into its base).
 //! * Ignored with a warning: unknown top-level elements. Ignored silently:
 //!   `material`, `transmission`, `gazebo`, `calibration`, `safety_controller`.
 //! * `<mimic joint multiplier offset>`: the joint follows its leader, `q = multiplier q_leader +
@@ -211,6 +214,8 @@ struct Emitter<'r> {
     indent: usize,
     /// `<mesh>` assets of the collision meshes: (URDF line, element).
     meshes: Vec<(usize, String)>,
+    /// `<contact><exclude>` of the links jointed to a base welded to the world.
+    excludes: Vec<(usize, String)>,
 }
 
 fn fmt3(v: &Vector3<f64>) -> String {
@@ -318,6 +323,7 @@ impl<'r> Emitter<'r> {
             lines: vec![],
             indent: 0,
             meshes: vec![],
+            excludes: vec![],
         })
     }
 
@@ -414,6 +420,15 @@ impl<'r> Emitter<'r> {
         }
         self.indent -= 1;
         self.line(1, "</worldbody>");
+        if !self.excludes.is_empty() {
+            self.line(1, "<contact>");
+            self.indent += 1;
+            for (line, text) in std::mem::take(&mut self.excludes) {
+                self.line(line, &text);
+            }
+            self.indent -= 1;
+            self.line(1, "</contact>");
+        }
         if !self.meshes.is_empty() {
             self.line(1, "<asset>");
             self.indent += 1;
@@ -499,6 +514,15 @@ impl<'r> Emitter<'r> {
             return Ok(());
         }
         let pose = self.engine_from_link[parent].compose(&j.origin);
+        // a link jointed to the base welded to the world: MuJoCo's pair rules let the world
+        // collide with its children, but jointed URDF links overlap at their joints
+        if self.engine[parent].is_none() {
+            let text = format!(
+                "<exclude body1=\"world\" body2=\"{}\"/>",
+                esc(&self.robot.links[child].name)
+            );
+            self.excludes.push((j.line, text));
+        }
         self.body(child, &pose, Some(ji))
     }
 
