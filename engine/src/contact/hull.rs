@@ -46,12 +46,24 @@ impl ConvexHull {
             .iter()
             .map(|p| ((p - center) / scale).iter().copied().collect())
             .collect();
-        let hull = chull::ConvexHull::try_new(&unit, 1e-12, None).map_err(|e| {
-            format!(
-                "no convex hull of the mesh's {} points: {e:?}",
-                points.len()
-            )
-        })?;
+        // (the library indexes and unwraps inside: a panic on a degenerate cloud is an error
+        // here, never a crash of the caller)
+        let built = std::panic::catch_unwind(|| chull::ConvexHull::try_new(&unit, 1e-12, None));
+        let hull = match built {
+            Ok(Ok(h)) => h,
+            Ok(Err(e)) => {
+                return Err(format!(
+                    "no convex hull of the mesh's {} points: {e:?}",
+                    points.len()
+                ));
+            }
+            Err(_) => {
+                return Err(format!(
+                    "no convex hull of the mesh's {} points (degenerate)",
+                    points.len()
+                ));
+            }
+        };
         let (pts, flat) = hull.vertices_indices();
         // each hull point is a copy of one unit point: back to the input point's index
         let key = |p: &[f64]| [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()];
@@ -67,6 +79,12 @@ impl ConvexHull {
             .map(|t| [index[t[0]], index[t[1]], index[t[2]]])
             .collect();
         let (vertices, triangles) = canonical(points, &triangles, scale);
+        if triangles.len() < 4 {
+            return Err(format!(
+                "the hull of the mesh's {} points has no volume",
+                points.len()
+            ));
+        }
         let mut out = ConvexHull {
             vertices,
             triangles,
@@ -454,5 +472,20 @@ mod tests {
         assert!(ConvexHull::new(&pts[..3]).is_err());
         let flat: Vec<_> = pts.iter().map(|p| Vector3::new(p.x, p.y, 0.0)).collect();
         assert!(ConvexHull::new(&flat).is_err());
+        // degenerate clouds are errors, never panics: repeated points, a line, a sliver
+        let mut r = Rng(5);
+        for case in 0..300 {
+            let n = 4 + r.below(12);
+            let cloud: Vec<Vector3<f64>> = (0..n)
+                .map(|k| match case % 3 {
+                    0 => Vector3::new(0.1, 0.2, 0.3) * f64::from(u8::from(k % 2 == 0)),
+                    1 => Vector3::new(1.0, 2.0, 3.0) * r.next(),
+                    _ => Vector3::new(r.next(), r.next(), 1e-13 * r.next()),
+                })
+                .collect();
+            if let Ok(h) = ConvexHull::new(&cloud) {
+                assert!(h.triangles.len() >= 4 && h.mass_properties().0 > 0.0);
+            }
+        }
     }
 }
