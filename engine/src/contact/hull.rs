@@ -19,6 +19,9 @@ pub struct ConvexHull {
     normals: Vec<Vector3<f64>>,
     /// Offset of each triangle's plane: `n · x = d` on it, `< d` inside.
     offsets: Vec<f64>,
+    /// The largest distance of a vertex from the origin (kept: the activation asks for it per
+    /// candidate, and a mesh has one candidate per vertex).
+    radius: f64,
 }
 
 impl ConvexHull {
@@ -90,12 +93,14 @@ impl ConvexHull {
             triangles,
             normals: Vec::new(),
             offsets: Vec::new(),
+            radius: 0.0,
         };
         out.refresh_planes();
         Ok(out)
     }
 
     fn refresh_planes(&mut self) {
+        self.radius = self.vertices.iter().map(|v| v.norm()).fold(0.0, f64::max);
         self.normals.clear();
         self.offsets.clear();
         for t in &self.triangles {
@@ -130,7 +135,7 @@ impl ConvexHull {
 
     /// The largest distance of a vertex from the geom origin (m).
     pub fn radius(&self) -> f64 {
-        self.vertices.iter().map(|v| v.norm()).fold(0.0, f64::max)
+        self.radius
     }
 
     /// Volume (m³), centre of volume (geom frame) and inertia about that centre per unit
