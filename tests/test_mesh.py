@@ -118,7 +118,8 @@ def ascii_stl(points, triangles):
 def test_stl_and_obj_files_load_as_the_inline_mesh(tmp_path):
     """Mesh files under `compiler/@meshdir` (relative to the model file): an ASCII STL and an
     OBJ of the rock give the mass and inertia of the inline `vertex` mesh; an unnamed mesh is
-    named after its file; a missing file and an unknown mesh name are errors naming them."""
+    named after its file; `strippath` keeps the file's name alone; a missing file and an
+    unknown mesh name are errors naming them."""
     tris = [(0, 1, 2), (0, 2, 3), (0, 3, 1), (1, 3, 2), (4, 5, 0), (5, 1, 0)]
     (tmp_path / "assets").mkdir()
     (tmp_path / "assets" / "rock.stl").write_text(ascii_stl(ROCK, tris))
@@ -138,6 +139,12 @@ def test_stl_and_obj_files_load_as_the_inline_mesh(tmp_path):
     inertia = np.array(m.body_inertia)
     for b in (1, 2):
         np.testing.assert_allclose(inertia[b], inertia[3], rtol=1e-5, atol=1e-11)
+    # compiler/@strippath: the file's name alone, under meshdir
+    stripped = xml.replace('<compiler meshdir="assets"/>',
+                           '<compiler meshdir="assets" strippath="true"/>')
+    stripped = stripped.replace('file="rock.stl"', 'file="/elsewhere/meshes/rock.stl"')
+    s = ukemi.Model.from_xml_path(_write(tmp_path, stripped))
+    np.testing.assert_array_equal(s.body_mass, m.body_mass)
     missing = xml.replace('<mesh file="rock.stl"/>', '<mesh name="rock" file="missing.stl"/>')
     with pytest.raises(ukemi.MjcfError, match=r"missing\.stl"):
         ukemi.Model.from_xml_path(_write(tmp_path, missing))

@@ -163,9 +163,15 @@ fn read_mesh<'a, 'i>(
 }
 
 /// A mesh file's path: absolute as given, else under `meshdir` (or `assetdir`), themselves
-/// relative to the model's folder (the working directory for a model given as a string).
+/// relative to the model's folder (the working directory for a model given as a string);
+/// with `compiler/@strippath`, the file's name alone.
 fn resolve(ctx: &Ctx, file: &str, dir: Option<&Path>) -> PathBuf {
-    let file = Path::new(file);
+    let mut file = Path::new(file);
+    if ctx.compiler.strippath
+        && let Some(name) = file.file_name()
+    {
+        file = Path::new(name);
+    }
     if file.is_absolute() {
         return file.to_path_buf();
     }

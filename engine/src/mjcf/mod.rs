@@ -2,7 +2,7 @@
 //!
 //! Supported: `include` (spliced in, paths beside the including file or the model file:
 //! [`include`]), `compiler` (angle, eulerseq, inertiafromgeom, inertiagrouprange, autolimits,
-//! settotalmass, meshdir, assetdir), `option` (timestep, gravity), nested `default` classes with
+//! settotalmass, meshdir, assetdir, strippath), `option` (timestep, gravity), nested `default` classes with
 //! `class` and `childclass`, the body tree (of every `worldbody`; bodies' `gravcomp`) with every
 //! orientation form, `inertial`, inertia from geoms (sphere, capsule, cylinder, box, ellipsoid,
 //! mesh), `asset/mesh` from STL or OBJ files or inline `vertex` lists with `scale` (a mesh geom
@@ -277,6 +277,9 @@ fn read_compiler<'a, 'i>(ctx: &mut Ctx<'a, 'i>, node: Node<'a, 'i>) -> Result<()
         .attribute("assetdir")
         .map(str::to_string)
         .or(c.assetdir.take());
+    if node.attribute("strippath").is_some() {
+        c.strippath = ctx.keyword(node, "", "strippath", &["true", "false"], "false")? == "true";
+    }
     if ctx.keyword(node, "", "coordinate", &["local", "global"], "local")? == "global" {
         return Err(ctx.unsupported(
             node,

@@ -26,6 +26,8 @@ pub(super) struct Compiler {
     pub meshdir: Option<String>,
     /// `assetdir`: the same for every asset, where `meshdir` is not given.
     pub assetdir: Option<String>,
+    /// `strippath`: asset files are named by their file names alone.
+    pub strippath: bool,
 }
 
 impl Default for Compiler {
@@ -39,6 +41,7 @@ impl Default for Compiler {
             total_mass: None,
             meshdir: None,
             assetdir: None,
+            strippath: false,
         }
     }
 }
