@@ -711,7 +711,10 @@ impl PyModel {
         numpy::PyArray1::from_vec(py, self.inner.params())
     }
 
-    /// One name per entry of `params`, e.g. `"body_mass[torso]"`.
+    /// One name per entry of `params`, e.g. `"body_mass[torso]"`. Groups, in order: body_mass,
+    /// body_inertia, geom_friction, geom_size, geom_pos, joint_stiffness, joint_damping,
+    /// joint_armature, joint_frictionloss, tendon_stiffness, tendon_damping,
+    /// tendon_frictionloss, actuator_gear, actuator_gain, actuator_bias, gravity, timestep.
     #[getter]
     fn param_names(&self) -> Vec<String> {
         self.inner.param_names()
