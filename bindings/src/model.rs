@@ -713,8 +713,7 @@ impl PyModel {
 
     /// One name per entry of `params`, e.g. `"body_mass[torso]"`. Groups, in order: body_mass,
     /// body_inertia, geom_friction, geom_size and geom_pos (geom by geom), joint_stiffness,
-    /// joint_damping,
-    /// joint_armature, joint_frictionloss, tendon_stiffness, tendon_damping,
+    /// joint_damping, joint_armature, joint_frictionloss, tendon_stiffness, tendon_damping,
     /// tendon_frictionloss, actuator_gear, actuator_gain, actuator_bias, gravity, timestep.
     #[getter]
     fn param_names(&self) -> Vec<String> {
