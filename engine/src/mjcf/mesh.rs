@@ -1,4 +1,4 @@
-//! `<asset><mesh>`: meshes from STL or OBJ files (`compiler/@meshdir`, `@assetdir`) or inline
+//! `<asset><mesh>`: meshes from STL, OBJ or MSH files (`compiler/@meshdir`, `@assetdir`) or inline
 //! `vertex` lists, scaled by `scale`. A mesh geom collides as the convex hull of its vertices
 //! and weighs as the solid hull, as MuJoCo's does (`inertia="convex"`; for a convex mesh every
 //! MuJoCo inertia mode agrees). As in MuJoCo, a mesh is recentred on its hull's centre of
@@ -188,6 +188,30 @@ fn resolve(ctx: &Ctx, file: &str, dir: Option<&Path>) -> PathBuf {
     }
 }
 
+/// The vertices of MuJoCo's own binary mesh format: four little-endian `i32` counts
+/// (vertices, normals, texture coordinates, faces), then the vertices as `f32` triples (the
+/// normals, texture coordinates and faces that follow are not needed for the hull).
+fn read_msh(bytes: &[u8]) -> std::result::Result<Vec<Vector3<f64>>, String> {
+    let word = |k: usize| -> Option<[u8; 4]> { bytes.get(4 * k..4 * k + 4)?.try_into().ok() };
+    let count = |k: usize| word(k).map(i32::from_le_bytes);
+    let (Some(nv), Some(nn), Some(nt), Some(nf)) = (count(0), count(1), count(2), count(3)) else {
+        return Err("an MSH file starts with four counts".to_string());
+    };
+    let size = |n: i32, per: i64| i64::from(n) * per;
+    let expected = 16 + 4 * (size(nv, 3) + size(nn, 3) + size(nt, 2) + size(nf, 3));
+    if nv < 0 || nn < 0 || nt < 0 || nf < 0 || expected != bytes.len() as i64 {
+        return Err(format!(
+            "MSH counts {nv} vertices, {nn} normals, {nt} texture coordinates, {nf} faces do \
+             not match its {} bytes",
+            bytes.len()
+        ));
+    }
+    let float = |k: usize| word(k).map_or(0.0, |w| f64::from(f32::from_le_bytes(w)));
+    Ok((0..nv as usize)
+        .map(|i| Vector3::new(float(4 + 3 * i), float(5 + 3 * i), float(6 + 3 * i)))
+        .collect())
+}
+
 /// The vertices of an STL (binary or ASCII) or OBJ file.
 fn load_points(path: &Path) -> std::result::Result<Vec<Vector3<f64>>, String> {
     let ext = path
@@ -213,8 +237,9 @@ fn load_points(path: &Path) -> std::result::Result<Vec<Vector3<f64>>, String> {
                 .map(|p| Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])))
                 .collect())
         }
+        "msh" => read_msh(&std::fs::read(path).map_err(|e| e.to_string())?),
         other => Err(format!(
-            "unsupported mesh format {other:?} (STL and OBJ are read)"
+            "unsupported mesh format {other:?} (STL, OBJ and MSH are read)"
         )),
     }
 }

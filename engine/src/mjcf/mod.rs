@@ -5,7 +5,7 @@
 //! settotalmass, meshdir, assetdir, strippath), `option` (timestep, gravity), nested `default` classes with
 //! `class` and `childclass`, the body tree (of every `worldbody`; bodies' `gravcomp`) with every
 //! orientation form, `inertial`, inertia from geoms (sphere, capsule, cylinder, box, ellipsoid,
-//! mesh), `asset/mesh` from STL or OBJ files or inline `vertex` lists with `scale` (a mesh geom
+//! mesh), `asset/mesh` from STL, OBJ or MSH files or inline `vertex` lists with `scale` (a mesh geom
 //! collides and weighs as the convex hull of its vertices, as in MuJoCo,
 //! [`crate::contact::hull::ConvexHull`]),
 //! hinge/slide/ball/free joints (several joints of one body become one engine joint with MuJoCo's
