@@ -49,9 +49,11 @@ impl ConvexHull {
             .iter()
             .map(|p| ((p - center) / scale).iter().copied().collect())
             .collect();
-        // (the library indexes and unwraps inside: a panic on a degenerate cloud is an error
-        // here, never a crash of the caller)
-        let built = std::panic::catch_unwind(|| chull::ConvexHull::try_new(&unit, 1e-12, None));
+        // In exact integer arithmetic (the points as multiples of f64::EPSILON at unit scale):
+        // its floating-point hull, on CAD meshes of float32 vertices (pybullet_data's laikago
+        // legs), left input points up to 3 cm outside a 13 cm hull. (The library indexes and
+        // unwraps inside: a panic on a degenerate cloud is an error here, never a crash.)
+        let built = std::panic::catch_unwind(|| chull::ConvexHullWrapper::try_new(&unit, None));
         let hull = match built {
             Ok(Ok(h)) => h,
             Ok(Err(e)) => {
@@ -68,10 +70,13 @@ impl ConvexHull {
             }
         };
         let (pts, flat) = hull.vertices_indices();
-        // each hull point is a copy of one unit point: back to the input point's index
-        let key = |p: &[f64]| [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()];
-        let input: std::collections::HashMap<[u64; 3], usize> =
-            unit.iter().enumerate().map(|(i, p)| (key(p), i)).collect();
+        // each hull point is an input point on the integer grid: back to its index
+        let grid = |x: f64| (x / f64::EPSILON).round() as i64;
+        let key = |p: &[f64]| [grid(p[0]), grid(p[1]), grid(p[2])];
+        let truncated = |x: f64| (x / f64::EPSILON).trunc() as i64;
+        let input: std::collections::HashMap<[i64; 3], usize> = (unit.iter().enumerate())
+            .map(|(i, p)| ([truncated(p[0]), truncated(p[1]), truncated(p[2])], i))
+            .collect();
         let index: Vec<usize> = pts
             .iter()
             .map(|p| input.get(&key(p)).copied())
@@ -109,9 +114,13 @@ impl ConvexHull {
                 self.vertices[t[1]],
                 self.vertices[t[2]],
             );
-            let n = (b - a).cross(&(c - a)).normalize();
+            let n = (b - a).cross(&(c - a));
+            // a sliver's normal is round-off: its plane would cut through the hull, so it
+            // takes no part in the inside test (NaN offset; its neighbours bound the hull)
+            let sliver = n.norm() <= 1e-9 * (b - a).norm() * (c - a).norm();
+            let n = n.normalize();
             self.normals.push(n);
-            self.offsets.push(n.dot(&a));
+            self.offsets.push(if sliver { f64::NAN } else { n.dot(&a) });
         }
     }
 
@@ -131,6 +140,7 @@ impl ConvexHull {
             .iter()
             .copied()
             .zip(self.offsets.iter().copied())
+            .filter(|(_, d)| d.is_finite())
     }
 
     /// The largest distance of a vertex from the geom origin (m).
@@ -172,6 +182,7 @@ impl ConvexHull {
         let mut best = f64::NEG_INFINITY;
         for (f, (n, d)) in self.normals.iter().zip(&self.offsets).enumerate() {
             let s = n.dot(q) - d;
+            // (NaN for a sliver: never the best)
             if s > best {
                 (best, nearest) = (s, f);
             }
