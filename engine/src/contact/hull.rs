@@ -101,6 +101,17 @@ impl ConvexHull {
             radius: 0.0,
         };
         out.refresh_planes();
+        // (every face a sliver, or no volume: no inside test and no mass would hold)
+        let volume = out.mass_properties().0;
+        if volume.is_nan()
+            || volume <= 1e-12 * scale.powi(3)
+            || out.offsets.iter().all(|d| d.is_nan())
+        {
+            return Err(format!(
+                "the hull of the mesh's {} points has no volume",
+                points.len()
+            ));
+        }
         Ok(out)
     }
 
