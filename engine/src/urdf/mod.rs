@@ -420,34 +420,14 @@ impl<'r> Emitter<'r> {
         }
         self.indent -= 1;
         self.line(1, "</worldbody>");
-        if !self.excludes.is_empty() {
-            self.line(1, "<contact>");
-            self.indent += 1;
-            for (line, text) in std::mem::take(&mut self.excludes) {
-                self.line(line, &text);
-            }
-            self.indent -= 1;
-            self.line(1, "</contact>");
-        }
-        if !self.meshes.is_empty() {
-            self.line(1, "<asset>");
-            self.indent += 1;
-            for (line, text) in std::mem::take(&mut self.meshes) {
-                self.line(line, &text);
-            }
-            self.indent -= 1;
-            self.line(1, "</asset>");
-        }
+        let excludes = std::mem::take(&mut self.excludes);
+        self.section("contact", excludes);
+        let meshes = std::mem::take(&mut self.meshes);
+        self.section("asset", meshes);
         // a mimic joint follows its leader (an equality), driven by the leader's motor
-        let mimics: Vec<usize> = (0..self.robot.joints.len())
-            .filter(|&j| self.robot.joints[j].mimic.is_some())
-            .collect();
-        if !mimics.is_empty() {
-            self.line(1, "<equality>");
-            self.indent += 1;
-            for j in mimics {
-                let joint = &self.robot.joints[j];
-                let Some(m) = &joint.mimic else { continue };
+        let mimics: Vec<(usize, String)> = (self.robot.joints.iter())
+            .filter_map(|joint| {
+                let m = joint.mimic.as_ref()?;
                 let text = format!(
                     "<joint joint1=\"{}\" joint2=\"{}\" polycoef=\"{} {} 0 0 0\"/>",
                     esc(&joint.name),
@@ -455,11 +435,10 @@ impl<'r> Emitter<'r> {
                     m.offset,
                     m.multiplier
                 );
-                self.line(m.line, &text);
-            }
-            self.indent -= 1;
-            self.line(1, "</equality>");
-        }
+                Some((m.line, text))
+            })
+            .collect();
+        self.section("equality", mimics);
         let motors: Vec<usize> = (0..self.robot.joints.len())
             .filter(|&j| {
                 matches!(
@@ -657,6 +636,20 @@ impl<'r> Emitter<'r> {
             }
             JointType::Fixed => {}
         }
+    }
+
+    /// A top-level `<tag>` holding `elements` (URDF line, text), or nothing when there are none.
+    fn section(&mut self, tag: &str, elements: Vec<(usize, String)>) {
+        if elements.is_empty() {
+            return;
+        }
+        self.line(1, &format!("<{tag}>"));
+        self.indent += 1;
+        for (line, text) in elements {
+            self.line(line, &text);
+        }
+        self.indent -= 1;
+        self.line(1, &format!("</{tag}>"));
     }
 
     /// Collision geoms of every link merged into `engine` (`None`: the world).
