@@ -43,6 +43,16 @@
 //! | capsule – mesh | 3: end spheres and the midpoint sphere against the hull |
 //! | box – mesh | each corner of the box against the hull, each hull vertex against the box |
 //! | mesh – mesh | each hull vertex of A against B's hull, and of B against A's |
+//! | sphere / point – cylinder | 1: signed distance of the centre to the cylinder, minus the radius |
+//! | capsule – cylinder | 3: the segment's point nearest the cylinder, and the end spheres |
+//! | box / mesh – cylinder | A's corners against the cylinder; per end disk, the rim's point nearest A and three fixed rim points against A |
+//! | cylinder – cylinder | per end disk of each, the rim's nearest point and three fixed rim points, and each side, against the other |
+//!
+//! The cylinder pairs are a *core* (ball, segment, rim, side) against a convex *solid* (box,
+//! cylinder, hull) measured by its exact signed distance; the core's point nearest the solid
+//! is found to round-off (`pairs/convex.rs`). A near-flat rim, segment or side (a disk lying on
+//! a face, a capsule or cylinder lying along one) is held at its nearest point at the step's
+//! predicted pose, as the disk–plane rim is ([`super::disk_rim_for_step`]).
 //!
 //! A mesh is the convex hull of its vertices ([`ConvexHull`], as MuJoCo collides it); the
 //! signed distance to it is exact outside (closest point on the hull's triangles) and the
@@ -53,7 +63,10 @@
 //! [`candidates`] reports when it had to exchange the two geoms.
 //!
 //! ## Limitations
-//! Cylinders and ellipsoids only collide with planes; plane–plane is unsupported. Capsule–box
+//! Ellipsoids only collide with planes; plane–plane is unsupported. An edge of a box or hull
+//! across a cylinder's side, or across its rim, is not detected (as edge on edge between
+//! boxes); deep inside a solid (a rim or segment crossing it) the nearest point ties two faces
+//! and the witness normal is one face's. Capsule–box
 //! and capsule–mesh only test three spheres on the segment, so a capsule crossing a box edge
 //! between them (e.g. a long capsule lying across a box) is not detected. Box–box, box–mesh
 //! and mesh–mesh only test vertices, so edge–edge contact (two boxes crossed edge on edge) is
@@ -77,6 +90,11 @@ pub use super::hull::ConvexHull;
 
 #[path = "pairs/kernels.rs"]
 mod kernels;
+
+#[path = "pairs/convex.rs"]
+mod convex;
+
+pub use convex::{Core, Solid, cylinder_distance};
 
 #[cfg(test)]
 #[path = "pairs/geometry_tests.rs"]
@@ -312,6 +330,21 @@ pub enum Feature {
         /// The ball of B.
         b: Ball,
     },
+    /// The point of a core of A (ball, segment, cylinder side or rim) nearest the convex solid
+    /// of B (the pairs with a cylinder, see [`Core`]).
+    CoreSolid {
+        /// The core of A.
+        a: Core,
+        /// The solid of B.
+        b: Solid,
+    },
+    /// The convex solid of A against the point of a core of B nearest it.
+    SolidCore {
+        /// The solid of A.
+        a: Solid,
+        /// The core of B.
+        b: Core,
+    },
 }
 
 /// Evaluated candidate.
@@ -389,6 +422,55 @@ pub fn evaluate(
         Feature::HullSphere { hull_a, b } => {
             kernels::sphere_hull(b, pose_b, hull_a, pose_a).swapped()
         }
+        Feature::CoreSolid { a, b } => convex::core_solid(a, pose_a, b, pose_b),
+        Feature::SolidCore { a, b } => convex::core_solid(b, pose_b, a, pose_a).swapped(),
+    }
+}
+
+/// The rim point (in the cylinder's geom frame) nearest the other geom of a cylinder-rim
+/// candidate (a [`Core::Rim`], or a [`Core::Side`] whose nearest axis point is an end), and the
+/// sine of the angle between that disk and the contact plane (0: the disk lies flat on the
+/// other solid); `None` for other candidates.
+pub fn rim_point(
+    feature: &Feature,
+    pose_a: &GeomPose,
+    pose_b: &GeomPose,
+) -> Option<(Vector3<f64>, f64)> {
+    match feature {
+        Feature::CoreSolid { a, b } => convex::nearest_rim(a, pose_a, b, pose_b),
+        Feature::SolidCore { a, b } => convex::nearest_rim(b, pose_b, a, pose_a),
+        _ => None,
+    }
+}
+
+/// A point of the cylinder (its geom frame, from [`rim_point`]) held for the step in place of a
+/// rim or side candidate's moving nearest point: a rim point is a ball of radius 0, a point on
+/// the axis (a side's) a ball of the cylinder's radius, against the other solid.
+pub fn frozen_rim(
+    feature: &Feature,
+    point: Vector3<f64>,
+    pose_a: &GeomPose,
+    pose_b: &GeomPose,
+) -> Option<Witness> {
+    let core = match feature {
+        Feature::CoreSolid { a, .. } => a,
+        Feature::SolidCore { b, .. } => b,
+        _ => return None,
+    };
+    let radius = match core {
+        Core::Side(s) | Core::Segment(s) if point.x == 0.0 && point.y == 0.0 => s.radius,
+        _ => 0.0,
+    };
+    let ball = Core::Ball(Ball {
+        center: point,
+        radius,
+    });
+    match feature {
+        Feature::CoreSolid { b, .. } => Some(convex::core_solid(&ball, pose_a, b, pose_b)),
+        Feature::SolidCore { a, .. } => {
+            Some(convex::core_solid(&ball, pose_b, a, pose_a).swapped())
+        }
+        _ => None,
     }
 }
 
@@ -502,11 +584,12 @@ fn between_solids(a: &Shape, b: &Shape) -> Result<Vec<Feature>, String> {
             Some(box_hull(half_extents, hull))
         }
         (None, Shape::Mesh { hull: ha }, Shape::Mesh { hull: hb }) => Some(hull_hull(ha, hb)),
+        (None, _, Shape::Cylinder { .. }) => solid_cylinder(a, b),
         _ => None,
     };
     features.ok_or_else(|| {
         let (ka, kb) = (a.kind(), b.kind());
-        format!("collision between a {ka} and a {kb} is not supported (cylinders and ellipsoids collide only with planes)")
+        format!("collision between a {ka} and a {kb} is not supported (ellipsoids collide only with planes)")
     })
 }
 
@@ -539,9 +622,97 @@ fn ball_against(a: Ball, b: &Shape) -> Option<Vec<Feature>> {
             a,
             hull_b: hull.clone(),
         },
+        Shape::Cylinder { .. } => Feature::CoreSolid {
+            a: Core::Ball(a),
+            b: solid(b)?,
+        },
         _ => return None,
     };
     Some(vec![feature])
+}
+
+/// The convex solid of a box, cylinder or mesh.
+fn solid(shape: &Shape) -> Option<Solid> {
+    Some(match *shape {
+        Shape::Box { half_extents } => Solid::Box { half_extents },
+        Shape::Cylinder {
+            radius,
+            half_length,
+        } => Solid::Cylinder {
+            radius,
+            half_length,
+        },
+        Shape::Mesh { ref hull } => Solid::Hull(hull.clone()),
+        _ => return None,
+    })
+}
+
+/// The cores of a cylinder against another solid: per end disk its rim's nearest point and
+/// three fixed rim points (0°, 120°, 240°: a disk lying flat on a face rests on them, as on a
+/// plane), then, against another cylinder, its side (crossed cylinders touch side on side).
+/// Against a box or a hull the side is left out: a face holds a lying cylinder at its rims'
+/// nearest points and the solid's corners meet the side as points, so only an edge across
+/// the side goes undetected (as edge on edge between boxes); with it, a cylinder lying on a
+/// face had its side's nearest point jump between the middle and the ends as it tilted by
+/// round-off, and its solves took ten times the iterations.
+fn cylinder_cores(radius: f64, half_length: f64, side: bool) -> Vec<Core> {
+    let mut cores = Vec::with_capacity(9);
+    for z in [-half_length, half_length] {
+        cores.push(Core::Rim { z, radius });
+        for k in 0..3 {
+            let angle = f64::from(k) * 2.0 * std::f64::consts::PI / 3.0;
+            let rim = Vector3::new(radius * angle.cos(), radius * angle.sin(), z);
+            cores.push(Core::Ball(ball(rim, 0.0)));
+        }
+    }
+    if side {
+        cores.push(Core::Side(Segment {
+            half_length,
+            radius,
+        }));
+    }
+    cores
+}
+
+/// Box, mesh or cylinder A against cylinder B: A's corners (a box's, a hull's vertices) or
+/// cylinder cores against B, then B's cylinder cores against A's solid. Edge–edge contact of a
+/// box or hull with a disk's rim is not detected (as box–box).
+fn solid_cylinder(a: &Shape, b: &Shape) -> Option<Vec<Feature>> {
+    let (solid_a, solid_b) = (solid(a)?, solid(b)?);
+    let Shape::Cylinder {
+        radius,
+        half_length,
+    } = *b
+    else {
+        return None;
+    };
+    let cores_a: Vec<Core> = match *a {
+        Shape::Box { half_extents } => box_corners(&half_extents)
+            .map(|c| Core::Ball(ball(c, 0.0)))
+            .to_vec(),
+        Shape::Mesh { ref hull } => hull
+            .vertices
+            .iter()
+            .map(|&v| Core::Ball(ball(v, 0.0)))
+            .collect(),
+        Shape::Cylinder {
+            radius,
+            half_length,
+        } => cylinder_cores(radius, half_length, true),
+        _ => return None,
+    };
+    let a_on_b = cores_a.into_iter().map(|core| Feature::CoreSolid {
+        a: core,
+        b: solid_b.clone(),
+    });
+    let both_cylinders = matches!(a, Shape::Cylinder { .. });
+    let b_on_a = cylinder_cores(radius, half_length, both_cylinders)
+        .into_iter()
+        .map(|core| Feature::SolidCore {
+            a: solid_a.clone(),
+            b: core,
+        });
+    Some(a_on_b.chain(b_on_a).collect())
 }
 
 /// Capsule A against capsule B (segments' closest points, then each end of A against B) or
@@ -572,6 +743,19 @@ fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
                     })
                     .to_vec(),
             )
+        }
+        // the segment's point nearest the cylinder, then the end spheres
+        Shape::Cylinder { .. } => {
+            let b = solid(b)?;
+            let first = Feature::CoreSolid {
+                a: Core::Segment(a),
+                b: b.clone(),
+            };
+            let rest = ends.map(|end| Feature::CoreSolid {
+                a: Core::Ball(end),
+                b: b.clone(),
+            });
+            Some([first].into_iter().chain(rest).collect())
         }
         // as against a box: the end spheres and the midpoint sphere
         Shape::Mesh { ref hull } => {

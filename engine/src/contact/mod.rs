@@ -174,6 +174,8 @@ impl Contact {
             Feature::CapsuleCapsule { a, b } => (a.radius, b.radius),
             Feature::BoxSphere { b, .. } | Feature::HullSphere { b, .. } => (0.0, b.radius),
             Feature::DiskPlane { .. } | Feature::EllipsoidPlane { .. } => (0.0, 0.0),
+            Feature::CoreSolid { a, .. } => (a.radius(), 0.0),
+            Feature::SolidCore { b, .. } => (0.0, b.radius()),
         }
     }
 }
@@ -288,7 +290,8 @@ impl StepRows {
 /// ([`freeze_for_step`]): the step's constraint is then a smooth function of the poses.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Frozen {
-    /// Disk–plane: the material rim point (A's geom frame), see [`disk_rim_for_step`].
+    /// A cylinder rim against a plane or another solid: the material rim point (in the
+    /// cylinder's geom frame), see [`disk_rim_for_step`].
     Rim(Vector3<f64>),
     /// Box corner against a box: the corner is measured against the plane of this face of the
     /// box (axis of the box's geom frame, outward side ±1), see [`box_face_for_step`].
@@ -328,6 +331,10 @@ pub fn witness_frozen_at(
 ) -> Witness {
     let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
     match (frozen, &c.feature) {
+        (Some(Frozen::Rim(point)), Feature::CoreSolid { .. } | Feature::SolidCore { .. }) => {
+            geometry::frozen_rim(&c.feature, point, wa, wb)
+                .unwrap_or_else(|| geometry::evaluate(&c.feature, &ga.shape, wa, &gb.shape, wb))
+        }
         (Some(Frozen::Rim(center)), _) => {
             let a = geometry::Ball {
                 center,
@@ -355,7 +362,10 @@ pub fn freeze_for_step(
     now: (&Pose, &Pose),
     predicted: (&Pose, &Pose),
 ) -> Option<Frozen> {
-    let disk = matches!(c.feature, Feature::DiskPlane { .. });
+    let disk = matches!(
+        c.feature,
+        Feature::DiskPlane { .. } | Feature::CoreSolid { .. } | Feature::SolidCore { .. }
+    );
     if !disk && !box_pair(c, geoms) {
         return None;
     }
@@ -548,7 +558,10 @@ pub fn disk_rim_for_step(
     predicted_b: &Pose,
     force: bool,
 ) -> Option<Vector3<f64>> {
-    if !matches!(c.feature, Feature::DiskPlane { .. }) {
+    if !matches!(
+        c.feature,
+        Feature::DiskPlane { .. } | Feature::CoreSolid { .. } | Feature::SolidCore { .. }
+    ) {
         return None;
     }
     let (ga, gb) = (&geoms[c.geom_a], &geoms[c.geom_b]);
@@ -559,7 +572,9 @@ pub fn disk_rim_for_step(
 /// [`disk_rim_for_step`] at the geoms' world poses `pa`, `pb`.
 fn disk_rim_at(c: &Contact, (pa, pb): (&GeomPose, &GeomPose), force: bool) -> Option<Vector3<f64>> {
     let Feature::DiskPlane { center_a, radius_a } = &c.feature else {
-        return None;
+        // a cylinder's rim against another solid: its nearest rim point, held when near flat
+        let (point, sine) = geometry::rim_point(&c.feature, pa, pb)?;
+        return (force || sine < DISK_FREEZE_SINE).then_some(point);
     };
     // plane normal in A's geom frame; its x, y part is the in-disk direction
     let n_local = pa.rot.transpose() * pb.rot.column(2);

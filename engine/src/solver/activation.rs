@@ -847,7 +847,7 @@ mod tests {
     fn bounding_spheres_never_exceed_the_distance() {
         // every shape against the floor and the others it collides with, random poses: the
         // bound that lets `prepare` and `missed_contacts` skip the narrow phase must be at most
-        // the signed distance (cylinders and ellipsoids collide with planes only)
+        // the signed distance (ellipsoids collide with planes only)
         let sphere = Shape::Sphere { radius: 0.1 };
         let capsule = Shape::Capsule {
             radius: 0.05,
@@ -879,8 +879,15 @@ mod tests {
         };
         let scenes = [
             vec![sphere.clone(), capsule.clone(), cuboid.clone()],
-            vec![cylinder],
+            vec![cylinder.clone()],
             vec![ellipsoid],
+            vec![
+                cylinder.clone(),
+                sphere.clone(),
+                capsule.clone(),
+                cuboid.clone(),
+                cylinder,
+            ],
             vec![mesh.clone(), sphere, capsule, cuboid, mesh],
         ];
         let mut rng = Rng(7);

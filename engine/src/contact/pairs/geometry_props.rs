@@ -93,7 +93,77 @@ fn unique_witness(f: &Feature, w: &Witness, pa: &GeomPose, pb: &GeomPose) -> boo
         Feature::HullSphere { hull_a, b } => {
             hull_unique(&pb.transform_point(&b.center), hull_a, pa)
         }
+        // a minimiser over a segment or rim: smooth where differences of two steps agree (a
+        // wrong witness fails the envelope check at every step, so this hides no error)
+        // (the core point is the surface witness, or a ball's or segment's centre behind it:
+        // a side at its axis' end is measured from its rim, so both must be clear)
+        Feature::CoreSolid { a, b } => {
+            let (surface, core) = (w.point_a, w.point_a + a.radius() * w.normal);
+            solid_unique(&surface, b, pb) && solid_unique(&core, b, pb) && smooth_around(f, pa, pb)
+        }
+        Feature::SolidCore { a, b } => {
+            let (surface, core) = (w.point_b, w.point_b - b.radius() * w.normal);
+            solid_unique(&surface, a, pa) && solid_unique(&core, a, pa) && smooth_around(f, pa, pb)
+        }
     }
+}
+
+/// Whether φ of a point against a solid is smooth around it (one nearest face or region, with
+/// a margin): deep inside, a core's nearest point ties two faces and φ's gradient mixes their
+/// normals, which a single witness normal cannot give (a solve keeps contacts shallow).
+fn solid_unique(point: &Vector3<f64>, solid: &Solid, pose: &GeomPose) -> bool {
+    match solid {
+        Solid::Box { half_extents } => {
+            // (and not on a mid-plane, where the two faces of the nearest axis tie)
+            let q = pose.rot.transpose() * (point - pose.pos);
+            let depth = |k: usize| half_extents[k] - q[k].abs();
+            let k = (1..3).fold(0, |best, k| if depth(k) < depth(best) { k } else { best });
+            box_unique(point, half_extents, pose) && (depth(k) < 0.0 || q[k].abs() > 1e-2)
+        }
+        Solid::Hull(hull) => hull_unique(point, hull, pose),
+        Solid::Cylinder {
+            radius,
+            half_length,
+        } => {
+            let margin = 1e-2;
+            let q = pose.rot.transpose() * (point - pose.pos);
+            let (dr, dz) = (q.x.hypot(q.y) - radius, q.z.abs() - half_length);
+            q.x.hypot(q.y) > margin
+                && if dr < 0.0 && dz < 0.0 {
+                    // (nearer a cap: not on the mid-plane, where the two caps tie)
+                    (dr - dz).abs() > margin && (dr > dz || q.z.abs() > margin)
+                } else {
+                    dr.abs() > margin && dz.abs() > margin
+                }
+        }
+    }
+}
+
+/// Whether central differences of φ with steps 1e-4 and 1e-6 agree to 1e-5 under each of the
+/// 12 unit rigid motions of A and B (no kink of φ within 1e-4 of the poses).
+fn smooth_around(f: &Feature, pa: &GeomPose, pb: &GeomPose) -> bool {
+    let phi = |qa: &GeomPose, qb: &GeomPose| evaluate(f, &Shape::Point, qa, &Shape::Point, qb).phi;
+    (0..12).all(|k| {
+        let unit = Vector3::ith(k % 3, 1.0);
+        let (dp, dth) = if k % 6 < 3 {
+            (unit, Vector3::zeros())
+        } else {
+            (Vector3::zeros(), unit)
+        };
+        let diff = |h: f64| {
+            let (mut qa, mut qb) = (*pa, *pb);
+            let (mut ra, mut rb) = (*pa, *pb);
+            if k < 6 {
+                qa = moved(pa, &(h * dp), &(h * dth));
+                ra = moved(pa, &(-h * dp), &(-h * dth));
+            } else {
+                qb = moved(pb, &(h * dp), &(h * dth));
+                rb = moved(pb, &(-h * dp), &(-h * dth));
+            }
+            (phi(&qa, &qb) - phi(&ra, &rb)) / (2.0 * h)
+        };
+        (diff(1e-4) - diff(1e-6)).abs() < 1e-5
+    })
 }
 
 /// Whether φ of a point against a hull is smooth around the point, with a margin: inside, one

@@ -376,7 +376,7 @@ fn unsupported_pairs_and_bad_dimensions() {
     };
     assert!(candidates(&Shape::Plane, &Shape::Plane).is_err());
     assert!(
-        candidates(&cylinder, &Shape::Sphere { radius: 1.0 })
+        candidates(&ellipsoid, &Shape::Sphere { radius: 1.0 })
             .unwrap_err()
             .contains("not supported")
     );

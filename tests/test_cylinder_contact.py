@@ -1,0 +1,129 @@
+"""Cylinders against spheres, capsules, boxes, meshes and other cylinders (until session 42 a
+cylinder collided with planes only, and gymnasium's Pusher arm passed through its object)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import ukemi
+
+SCENE = '<mujoco><option timestep="0.005"/><worldbody>{}</worldbody></mujoco>'
+BOX_MESH = " ".join(f"{sx * 0.1} {sy * 0.1} {sz * 0.05}"
+                    for sx in (1, -1) for sy in (1, -1) for sz in (1, -1))
+
+# (scene, body z at rest: analytic)
+RESTING = {
+    "box on an upright cylinder's cap":
+        ('<geom type="cylinder" size="0.1 0.2" pos="0 0 0.2"/><body pos="0.02 0.01 0.5">'
+         '<freejoint/><geom type="box" size="0.15 0.1 0.05"/></body>', 0.45),
+    "cylinder lying on a box":
+        ('<geom type="box" size="0.5 0.5 0.1" pos="0 0 0.1"/><body pos="0 0 0.4" euler="90 0 0">'
+         '<freejoint/><geom type="cylinder" size="0.1 0.2"/></body>', 0.3),
+    "sphere on a cylinder's cap":
+        ('<geom type="cylinder" size="0.1 0.2" pos="0 0 0.2"/><body pos="0.03 0 0.6"><freejoint/>'
+         '<geom type="sphere" size="0.05"/></body>', 0.45),
+    "capsule across a lying cylinder":
+        ('<geom type="cylinder" size="0.1 0.5" pos="0 0 0.1" euler="0 90 0"/><body pos="0 0 0.4">'
+         '<freejoint/><geom type="capsule" size="0.05" fromto="0 -0.3 0 0 0.3 0"/></body>', 0.25),
+    "cylinder standing on a cylinder":
+        ('<geom type="cylinder" size="0.1 0.2" pos="0 0 0.2"/><body pos="0.01 0 0.7"><freejoint/>'
+         '<geom type="cylinder" size="0.08 0.1"/></body>', 0.5),
+    "crossed lying cylinders":
+        ('<geom type="cylinder" size="0.1 0.5" pos="0 0 0.1" euler="0 90 0"/>'
+         '<body pos="0 0 0.4" euler="90 0 0"><freejoint/><geom type="cylinder" size="0.05 0.3"/>'
+         '</body>', 0.25),
+    "mesh box on a cylinder":
+        ('<geom type="cylinder" size="0.2 0.1" pos="0 0 0.1"/><body pos="0.05 0 0.4"><freejoint/>'
+         '<geom type="mesh" mesh="m"/></body>', 0.25),
+}
+
+
+def load(xml):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return ukemi.Model.from_xml_string(xml)
+
+
+def scene(body):
+    xml = SCENE.format(body)
+    if 'mesh="m"' in xml:
+        xml = xml.replace("<worldbody>", f'<asset><mesh name="m" vertex="{BOX_MESH}"/></asset>'
+                          "<worldbody>")
+    return xml
+
+
+@pytest.mark.parametrize("name", list(RESTING))
+def test_bodies_come_to_rest_on_cylinders_at_the_analytic_height(name):
+    """Dropped from a few centimetres, each body comes to rest where the geometry puts it
+    (to 1e-8 m: no sinking), every step converged, and MuJoCo's soft contacts rest it at the
+    same place within their penetration (1 mm)."""
+    body, z = RESTING[name]
+    xml = scene(body)
+    m = load(xml)
+    traj = ukemi.rollout(m, m.make_state(), nsteps=400)
+    assert set(traj.status.tolist()) <= {"converged", "acceptable"}
+    assert abs(traj.qpos[-1, 2] - z) < 1e-8, traj.qpos[-1]
+    assert np.abs(traj.qvel[-1]).max() < 1e-6
+    least = min(ukemi.signed_distances(m, m.make_state(qpos=q)).min() for q in traj.qpos)
+    assert least > -1e-8
+    mujoco = pytest.importorskip("mujoco")
+    mj = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(mj)
+    for _ in range(400):
+        mujoco.mj_step(mj, d)
+    assert abs(d.qpos[2] - z) < 1e-3, d.qpos
+
+
+CAPSULE = '<body pos="0 0 0.45" euler="{e}"><freejoint/><geom type="capsule" size="0.05 0.2"/></body>'
+CYLINDER = '<body pos="0 0 0.45" euler="{e}"><freejoint/><geom type="cylinder" size="0.1 0.15"/></body>'
+GROUNDS = {
+    "plane": '<geom type="plane" size="3 3 0.1" pos="0 0 0.2"/>',
+    "box": '<geom type="box" size="3 3 0.1" pos="0 0 0.1"/>',
+    "cylinder": '<geom type="cylinder" size="3 0.1" pos="0 0 0.1"/>',
+}
+
+
+@pytest.mark.parametrize(("body", "ground"), [(CAPSULE, "cylinder"),
+                                              (CYLINDER, "box")])
+@pytest.mark.parametrize(("euler", "qvel"), [("35 20 0", [0.5, 0.2, 0, 3, -2, 5]),
+                                             ("90 0 0", [0.4, 0, 0, 4, 0, 0]),
+                                             ("5 3 0", [0.3, 0.1, 0, 0, 0, 2])])
+def test_a_flat_face_of_a_solid_acts_as_a_plane(body, ground, euler, qvel):
+    """A capsule or cylinder thrown spinning onto the flat top of a big box or cylinder lands,
+    rolls and tumbles as on a plane at the same height (the same trajectory to 1e-7 m over 300
+    steps): the rim's nearest point, the capsule segment's and the frozen near-flat points
+    reproduce the plane's exact candidates."""
+    out = []
+    for g in ("plane", ground):
+        m = load(SCENE.format(GROUNDS[g] + body.format(e=euler)))
+        traj = ukemi.rollout(m, m.make_state(qvel=np.array(qvel, float)), nsteps=300)
+        assert set(traj.status.tolist()) <= {"converged", "acceptable"}
+        out.append(traj.qpos)
+    np.testing.assert_allclose(out[1], out[0], atol=1e-7)
+
+
+def test_the_pusher_arm_pushes_its_object_without_sinking_into_it():
+    """gymnasium's Pusher: the gripper's capsules sweep into the cylinder object (which slides
+    on the table); it is pushed along (0.3 m and more) and never overlaps them. Before cylinders
+    collided with capsules the arm passed through it (the object stayed put)."""
+    from ukemi._loaders import gymnasium_asset_path
+
+    path = str(gymnasium_asset_path("pusher"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        m = ukemi.Model.from_xml_path(path)
+    assert not [w for w in caught if "never collide" in str(w.message)]  # no pair left out
+    q0 = np.zeros(m.nq)
+    q0[1] = 0.37  # shoulder lift: the gripper at the object's height
+    q0[7], q0[8] = -0.35, 0.302  # the object (slide y, x) 0.2 m beside the gripper
+    ctrl = np.zeros((120, m.nu))
+    ctrl[:, 0] = 2.0  # the shoulder pans the gripper into it
+    traj = ukemi.rollout(m, m.make_state(qpos=q0), ctrl)
+    assert set(traj.status.tolist()) <= {"converged", "acceptable"}
+    moved = np.linalg.norm(traj.qpos[-1, 7:9] - q0[7:9])
+    assert moved > 0.3, moved
+    least = min(ukemi.signed_distances(m, m.make_state(qpos=q)).min() for q in traj.qpos)
+    assert least > -1e-8, least
