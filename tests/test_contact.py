@@ -101,7 +101,7 @@ def test_contact_argument_errors():
     b2 = ukemi.ModelBuilder()
     b2.add_body("a", 1.0, (0.1, 0.1, 0.1))
     b2.add_joint("f", "free", "world", "a")
-    b2.add_geom("c", "a", "cylinder", size=(0.1, 0.1))
+    b2.add_geom("c", "a", "ellipsoid", size=(0.1, 0.1, 0.2))
     b2.add_geom("d", "world", "sphere", size=(0.1,))
     with pytest.raises(ukemi.UnsupportedError, match="geom"):
         b2.compile()
