@@ -511,6 +511,15 @@ pub fn box_box_axis(
     kernels::box_box_axis(half_a, pose_a, half_b, pose_b)
 }
 
+/// Distance between the segments `c1 ± h1 d1` and `c2 ± h2 d2` (unit directions, world).
+pub fn segment_distance(
+    (c1, d1, h1): (&Vector3<f64>, &Vector3<f64>, f64),
+    (c2, d2, h2): (&Vector3<f64>, &Vector3<f64>, f64),
+) -> f64 {
+    let (s, t) = kernels::segment_params(&(c1 - c2), d1, h1, d2, h2);
+    (c1 + s * d1 - c2 - t * d2).norm()
+}
+
 /// Ball of the given centre and radius.
 fn ball(center: Vector3<f64>, radius: f64) -> Ball {
     Ball { center, radius }

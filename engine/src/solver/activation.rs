@@ -31,7 +31,7 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     let mut memo = crate::contact::BoxPairMemo::default();
     let mut poses = std::mem::take(&mut ws.geom_poses);
     let mut posed = false;
-    // (a mesh pair's separation along its centres' axis, for the pair's run of candidates)
+    // (a mesh or cylinder pair's lower bound, for the pair's run of candidates)
     let mut pair_gap: Option<((usize, usize), f64)> = None;
     for (c, contact) in model.contacts.iter().enumerate() {
         let margin = candidate_margin(model, contact);
@@ -44,7 +44,7 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
             let gap = match pair_gap {
                 Some((k, g)) if k == key => g,
                 _ => {
-                    let g = a.gap(b).max(mesh_pair_gap(model, key, a, b));
+                    let g = a.gap(b).max(convex_pair_gap(model, key, a, b));
                     pair_gap = Some((key, g));
                     g
                 }
@@ -208,13 +208,21 @@ impl GeomBound {
 /// one candidate per hull vertex, each an `O(faces)` distance to prepare: arm links two joints
 /// apart lie within each other's bounding spheres yet well apart along the arm (pybullet_data's
 /// Panda URDF, 10330 candidates).
-fn mesh_pair_gap(model: &Model, (ga, gb): (usize, usize), a: &GeomBound, b: &GeomBound) -> f64 {
+///
+/// A pair with a cylinder takes this bound too, and, when both are spheres, capsules or
+/// cylinders, the distance between their core segments less their radii (a cylinder lies in
+/// the capsule of its radius about its axis): each of its candidates finds a nearest point by
+/// a 1-D search, and the shared A1's legs lie within the bounding spheres of its trunk's and
+/// hips' cylinders at every step.
+fn convex_pair_gap(model: &Model, (ga, gb): (usize, usize), a: &GeomBound, b: &GeomBound) -> f64 {
     use crate::contact::geometry::Shape;
     let (sa, sb) = (&model.geoms[ga].shape, &model.geoms[gb].shape);
     let mesh = |s: &Shape| matches!(s, Shape::Mesh { .. });
+    let cylinder = |s: &Shape| matches!(s, Shape::Cylinder { .. });
     let offset = b.frame.pos - a.frame.pos;
     let dist = offset.norm();
-    if !(mesh(sa) || mesh(sb)) || dist < 1e-12 {
+    let with_cylinder = cylinder(sa) || cylinder(sb);
+    if !(mesh(sa) || mesh(sb) || with_cylinder) || dist < 1e-12 {
         return f64::NEG_INFINITY;
     }
     let d = offset / dist;
@@ -222,7 +230,38 @@ fn mesh_pair_gap(model: &Model, (ga, gb): (usize, usize), a: &GeomBound, b: &Geo
         support(sa, &(a.frame.rot.transpose() * d)),
         support(sb, &(b.frame.rot.transpose() * -d)),
     );
-    dist - ha - hb
+    let along = dist - ha - hb;
+    match (core_segment(sa), core_segment(sb)) {
+        (Some((half_a, ra)), Some((half_b, rb))) if with_cylinder => {
+            let axis = |g: &GeomBound| g.frame.rot.column(2).into_owned();
+            let (da, db) = (axis(a), axis(b));
+            let cores = crate::contact::geometry::segment_distance(
+                (&a.frame.pos, &da, half_a),
+                (&b.frame.pos, &db, half_b),
+            );
+            along.max(cores - ra - rb)
+        }
+        _ => along,
+    }
+}
+
+/// The segment along its z (half length) and the radius about it of a shape that lies within
+/// that capsule: a sphere or point (length 0), a capsule, a cylinder.
+fn core_segment(shape: &crate::contact::geometry::Shape) -> Option<(f64, f64)> {
+    use crate::contact::geometry::Shape;
+    match *shape {
+        Shape::Sphere { radius } => Some((0.0, radius)),
+        Shape::Point => Some((0.0, 0.0)),
+        Shape::Capsule {
+            radius,
+            half_length,
+        }
+        | Shape::Cylinder {
+            radius,
+            half_length,
+        } => Some((half_length, radius)),
+        _ => None,
+    }
 }
 
 /// The support function of a shape about its origin along the unit direction `u` (its frame):
@@ -240,7 +279,7 @@ fn support(shape: &crate::contact::geometry::Shape, u: &Vector3<f64>) -> f64 {
         Shape::Cylinder {
             radius,
             half_length,
-        } => radius * u.x.hypot(u.y) + half_length * u.z.abs(),
+        } => radius * (u.x * u.x + u.y * u.y).sqrt() + half_length * u.z.abs(),
         Shape::Box { half_extents } => half_extents.dot(&u.abs()),
         Shape::Ellipsoid { radii } => radii.component_mul(u).norm(),
         Shape::Mesh { ref hull } => (hull.vertices.iter())
@@ -917,7 +956,7 @@ mod tests {
                     informative += usize::from(gap > 0.0);
                     // a mesh pair's separation along its origins' axis: a bound too, and one
                     // that culls where the spheres do not
-                    let axis = mesh_pair_gap(&model, (contact.geom_a, contact.geom_b), &a, &b);
+                    let axis = convex_pair_gap(&model, (contact.geom_a, contact.geom_b), &a, &b);
                     assert!(
                         axis <= exact[c] + 1e-12,
                         "candidate {c}: axis bound {axis} > distance {}",

@@ -289,7 +289,8 @@ fn first_rise(slope: impl Fn(f64) -> f64, tol: f64, hi: f64) -> f64 {
     hi
 }
 
-/// The `t ∈ [−half, half]` minimising `sd(c + t d)`, nearest 0 where the minimum is flat.
+/// The `t ∈ [−half, half]` minimising `sd(c + t d)`, nearest 0 where the minimum is flat (or,
+/// against a cylinder, the point nearest its axis where that is a minimiser).
 fn segment_minimiser(solid: &Solid, c: &Vector3<f64>, d: &Vector3<f64>, half: f64) -> f64 {
     let slope = |t: f64| solid.distance(&(c + t * d)).2.dot(d); // g'(t) = n · d
     let s0 = slope(0.0);
@@ -299,6 +300,14 @@ fn segment_minimiser(solid: &Solid, c: &Vector3<f64>, d: &Vector3<f64>, half: f6
     // the minimiser lies on the side `g` decreases towards; find the nearest t there where
     // g stops decreasing (g' ≥ −FLAT_SLOPE going outwards)
     let dir = if s0 < 0.0 { 1.0 } else { -1.0 };
+    if let Solid::Cylinder { half_length, .. } = *solid {
+        // against a cylinder's side the minimiser is the segment's point nearest its axis
+        // (most capsule–cylinder contacts: one evaluation instead of a search)
+        let (t, _) = super::kernels::segment_params(c, d, half, &Vector3::z(), half_length);
+        if dir * t > 0.0 && slope(t).abs() <= FLAT_SLOPE {
+            return t;
+        }
+    }
     let rising = |t: f64| dir * slope(dir * t) >= -FLAT_SLOPE;
     if !rising(half) {
         return dir * half;
