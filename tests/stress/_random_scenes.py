@@ -13,7 +13,10 @@ import ukemi
 from ._util import add_free, floor_builder
 
 SHAPES = ("sphere", "box", "capsule", "cylinder", "ellipsoid")
-PAIRWISE = ("sphere", "box", "capsule")  # cylinders and ellipsoids collide only with planes
+# the shapes of the scenes below (kept as they were measured; ellipsoids collide only with
+# planes): cylinders meet the others in `random_pile`
+PAIRWISE = ("sphere", "box", "capsule")
+PILE = ("sphere", "box", "capsule", "cylinder", "cylinder")
 COMMON_KINDS = ("revolute", "prismatic", "spherical", "orbital")  # hinge, slide, ball, universal
 LINK_SPACING = 0.35  # m between link centres: only adjacent (excluded) links can overlap
 
@@ -135,3 +138,22 @@ def random_scene(seed: int, joint_friction: bool = False):
     rub = np.random.default_rng([seed, 1]) if joint_friction else None
     desc = _loose_bodies(rng, b) if rng.random() < 0.4 else _mechanism(rng, b, rub)
     return b.compile(), desc
+
+
+def random_pile(seed: int):
+    """(model, description) of pile ``seed``: 3-6 free bodies of random shapes (cylinders drawn
+    twice as often), sizes, masses and orientations dropped one above the other within a
+    0.3 m square, so that they land on each other: every pair of shapes with a cylinder."""
+    rng = np.random.default_rng([seed, 2])
+    b = floor_builder(friction=float(rng.uniform(0.2, 1.0)))
+    nbody = int(rng.integers(3, 7))
+    shapes = []
+    for i in range(nbody):
+        shape = PILE[int(rng.integers(len(PILE)))]
+        size = _size(rng, shape, hi=0.12)
+        mass = float(np.exp(rng.uniform(np.log(0.2), np.log(5.0))))
+        pos = (float(rng.uniform(-0.15, 0.15)), float(rng.uniform(-0.15, 0.15)), 0.3 + 0.3 * i)
+        add_free(b, f"b{i}", shape, size, mass, inertia(shape, size, mass), pos,
+                 tuple(_quat(rng)), friction=float(rng.uniform(0.2, 1.0)))
+        shapes.append(shape)
+    return b.compile(), f"pile of {', '.join(shapes)}"

@@ -10,8 +10,8 @@ import pytest
 
 import ukemi
 
-from ._measured import RANDOM_SCENES
-from ._random_scenes import random_scene
+from ._measured import PILES, RANDOM_SCENES
+from ._random_scenes import random_pile, random_scene
 from ._util import FULL, assert_stable, steps
 
 NSCENES = 1000 if FULL else 100
@@ -37,6 +37,27 @@ def check(seed: int, nsteps: int = NSTEPS, joint_friction: bool = False):
 def test_random_scene(seed):
     m, desc, tr, gain = check(seed)
     assert_stable(m, tr, energy_gain=gain)
+
+
+def pile(seed: int, nsteps: int = NSTEPS):
+    """Run pile ``seed`` and return (model, description, trajectory)."""
+    m, desc = random_pile(seed)
+    return m, desc, ukemi.rollout(m, m.make_state(), nsteps=nsteps, on_failure="return")
+
+
+PILE_REASON = ("engine limit (README 'Known limits': box edge across a box edge, or a near-flat "
+               "cylinder rim held at one point for the step); measured over 300 steps: ")
+
+
+@pytest.mark.parametrize("seed", [
+    pytest.param(seed, marks=pytest.mark.xfail(strict=False, reason=PILE_REASON + PILES[seed]))
+    if seed in PILES else seed for seed in range(NSCENES // 4)])
+def test_random_pile_with_cylinders(seed):
+    """3-6 bodies (spheres, boxes, capsules and, most often, cylinders) dropped onto each other:
+    every step converges, nothing sinks into anything (the cylinder pairs' rims, sides and
+    segments included) and the energy never rises."""
+    m, _, tr = pile(seed)
+    assert_stable(m, tr, energy_gain=1e-4)
 
 
 @pytest.mark.parametrize("seed", range(NSCENES))

@@ -892,6 +892,9 @@ pub(crate) fn spin_limited_step(model: &Model, ws: &Workspace) -> f64 {
     alpha
 }
 
+/// Rounds of [`solve`]'s check of the solved step (candidates it reached, limits, re-frozen rims).
+const ROUNDS: usize = 6;
+
 /// Solve the prepared step: plain Newton without inequality nodes, the interior-point method
 /// with them. Leaves the solution in `ws.w` and `ws.next_pose`.
 pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
@@ -942,9 +945,11 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
     // configuration; if the step brought one within a quarter of the activation margin, solve
     // the step again with it active (rare: the activation reach already covers twice the
     // current speeds). Likewise a near-flat disk whose frozen rim point was not the lowest at
-    // the new configuration is re-frozen there. A few rounds at most; the last one has every
-    // candidate active.
-    for round in 0..3 {
+    // the new configuration is re-frozen there. Six rounds at most (three before cylinders met
+    // other solids: piles of cylinders ended steps with a re-frozen rim still 8 µm deep, and one
+    // step took 14k iterations; six left 0.1 µm and 4.5k, BENCHMARKS.md session 42); the
+    // fifth and sixth have every candidate active.
+    for round in 0..ROUNDS {
         if !report.status.is_success() {
             break;
         }
@@ -958,7 +963,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
             break;
         }
         ws.w_solved.copy_from_slice(&ws.w);
-        if round == 2 {
+        if round == ROUNDS - 2 {
             ws.active.fill(true);
         }
         let iterations = report.iterations;
