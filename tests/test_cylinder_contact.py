@@ -127,3 +127,30 @@ def test_the_pusher_arm_pushes_its_object_without_sinking_into_it():
     assert moved > 0.3, moved
     least = min(ukemi.signed_distances(m, m.make_state(qpos=q)).min() for q in traj.qpos)
     assert least > -1e-8, least
+
+
+ROLLER = """<mujoco><option timestep="0.01"/><worldbody><geom type="plane" size="5 5 0.1"/>
+  <body pos="0 0 0.1" euler="90 0 0"><freejoint/><geom type="cylinder" size="0.1 0.3" mass="2"/>
+  </body>
+  <body pos="0 0 0.25" euler="0 0 {yaw}"><freejoint/><geom type="box" size="0.3 0.2 0.05" mass="5"/>
+  </body></worldbody></mujoco>"""
+
+
+@pytest.mark.parametrize("yaw", [0, 30])
+def test_a_box_pushed_across_a_roller_rides_on_it(yaw):
+    """A box lying across a roller longer than the box is wide (the roller's rims beyond the
+    box), pushed along at 1 m/s: it rides on the roller's side (and seesaws on it) while the
+    roller rolls along under it, nothing overlaps and the energy never rises. The contacts are
+    where the box's edges cross the roller's top (box edges against the cylinder); without them
+    the box fell through the roller and lay on the floor (its centre at 0.05 m)."""
+    m = load(ROLLER.format(yaw=yaw))
+    qvel = np.zeros(m.nv)
+    qvel[6] = 1.0
+    traj = ukemi.rollout(m, m.make_state(qvel=qvel), nsteps=150)
+    assert set(traj.status.tolist()) <= {"converged", "acceptable"}
+    assert traj.qpos[:, 9].min() > 0.15  # the box's centre: on the roller, not the floor
+    assert traj.qpos[-1, 0] > 0.05  # the roller rolled along x
+    assert traj.qpos[-1, 7] > 1.5 * traj.qpos[-1, 0]  # the box rides ahead of its axis
+    least = min(ukemi.signed_distances(m, m.make_state(qpos=q)).min() for q in traj.qpos)
+    assert least > -1e-8
+    assert np.diff(np.asarray(traj.energy)).max() < 1e-3

@@ -45,7 +45,8 @@
 //! | mesh – mesh | each hull vertex of A against B's hull, and of B against A's |
 //! | sphere / point – cylinder | 1: signed distance of the centre to the cylinder, minus the radius |
 //! | capsule – cylinder | 3: the segment's point nearest the cylinder, and the end spheres |
-//! | box / mesh – cylinder | A's corners against the cylinder; per end disk, the rim's point nearest A and three fixed rim points against A |
+//! | box – cylinder | A's corners and A's twelve edges' nearest points against the cylinder; per end disk, the rim's point nearest A and three fixed rim points against A |
+//! | mesh – cylinder | A's hull vertices against the cylinder; per end disk, the rim's point nearest A and three fixed rim points against A |
 //! | cylinder – cylinder | per end disk of each, the rim's nearest point and three fixed rim points, and each side, against the other |
 //!
 //! The cylinder pairs are a *core* (ball, segment, rim, side) against a convex *solid* (box,
@@ -63,10 +64,10 @@
 //! [`candidates`] reports when it had to exchange the two geoms.
 //!
 //! ## Limitations
-//! Ellipsoids only collide with planes; plane–plane is unsupported. An edge of a box or hull
-//! across a cylinder's side, or across its rim, is not detected (as edge on edge between
-//! boxes); deep inside a solid (a rim or segment crossing it) the nearest point ties two faces
-//! and the witness normal is one face's. Capsule–box
+//! Ellipsoids only collide with planes; plane–plane is unsupported. A hull's edge across a
+//! cylinder's side, and a box's or hull's edge across a cylinder's rim, are not detected (as
+//! edge on edge between boxes); deep inside a solid (a rim or segment crossing it) the nearest
+//! point ties two faces and the witness normal is one face's. Capsule–box
 //! and capsule–mesh only test three spheres on the segment, so a capsule crossing a box edge
 //! between them (e.g. a long capsule lying across a box) is not detected. Box–box, box–mesh
 //! and mesh–mesh only test vertices, so edge–edge contact (two boxes crossed edge on edge) is
@@ -660,10 +661,11 @@ fn solid(shape: &Shape) -> Option<Solid> {
 /// three fixed rim points (0°, 120°, 240°: a disk lying flat on a face rests on them, as on a
 /// plane), then, against another cylinder, its side (crossed cylinders touch side on side).
 /// Against a box or a hull the side is left out: a face holds a lying cylinder at its rims'
-/// nearest points and the solid's corners meet the side as points, so only an edge across
-/// the side goes undetected (as edge on edge between boxes); with it, a cylinder lying on a
-/// face had its side's nearest point jump between the middle and the ends as it tilted by
-/// round-off, and its solves took ten times the iterations.
+/// nearest points, or where the face's edges cross it (a box's edges are its candidates), and
+/// the corners meet the side as points. With the side, a cylinder lying on a face had its
+/// side's nearest point jump between the middle and the ends as it tilted by round-off (its
+/// solves took ten times the iterations), and a box on a roller jammed: a single point cannot
+/// hold a line contact whose ends swap as it tilts.
 fn cylinder_cores(radius: f64, half_length: f64, side: bool) -> Vec<Core> {
     let mut cores = Vec::with_capacity(9);
     for z in [-half_length, half_length] {
@@ -696,9 +698,11 @@ fn solid_cylinder(a: &Shape, b: &Shape) -> Option<Vec<Feature>> {
         return None;
     };
     let cores_a: Vec<Core> = match *a {
-        Shape::Box { half_extents } => box_corners(&half_extents)
-            .map(|c| Core::Ball(ball(c, 0.0)))
-            .to_vec(),
+        Shape::Box { half_extents } => (box_corners(&half_extents)
+            .map(|c| Core::Ball(ball(c, 0.0))))
+        .into_iter()
+        .chain(box_edges(&half_extents))
+        .collect(),
         Shape::Mesh { ref hull } => hull
             .vertices
             .iter()
@@ -821,6 +825,23 @@ fn box_box(half_a: &Vector3<f64>, half_b: &Vector3<f64>) -> Vec<Feature> {
         b: ball(c, 0.0),
     });
     a_in_b.into_iter().chain(b_in_a).collect()
+}
+
+/// The twelve edges of a box as segment cores: for each axis, the four edges along it.
+fn box_edges(half: &Vector3<f64>) -> impl Iterator<Item = Core> + '_ {
+    (0..3).flat_map(move |k| {
+        let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+        [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)].map(|(si, sj)| {
+            let mut centre = Vector3::zeros();
+            centre[i] = si * half[i];
+            centre[j] = sj * half[j];
+            Core::Edge {
+                centre,
+                direction: Vector3::ith(k, 1.0),
+                half_length: half[k],
+            }
+        })
+    })
 }
 
 /// The two ends of a segment along z: `(0, 0, ∓half_length)`.

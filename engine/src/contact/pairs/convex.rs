@@ -87,6 +87,16 @@ pub enum Core {
     /// A cylinder's side: its axis segment with the cylinder's radius; at an end of the axis,
     /// that end's rim.
     Side(Segment),
+    /// A box's edge: the segment `centre ± t direction`, `|t| ≤ half_length` (geom frame,
+    /// unit direction), of radius 0.
+    Edge {
+        /// Midpoint of the edge (geom frame).
+        centre: Vector3<f64>,
+        /// Unit direction of the edge (geom frame).
+        direction: Vector3<f64>,
+        /// Half the edge's length (m).
+        half_length: f64,
+    },
     /// The rim of a cylinder's end disk at height `z` on the geom's z axis.
     Rim {
         /// Height of the disk's centre on the geom's z axis (m).
@@ -103,7 +113,7 @@ impl Core {
         match self {
             Core::Ball(b) => b.radius,
             Core::Segment(s) | Core::Side(s) => s.radius,
-            Core::Rim { .. } => 0.0,
+            Core::Rim { .. } | Core::Edge { .. } => 0.0,
         }
     }
 }
@@ -179,6 +189,14 @@ pub fn core_solid(
             let theta = rim_minimiser(solid, &centre, &axis(0), &axis(1), radius);
             (rim_point(&centre, &axis(0), &axis(1), radius, theta), 0.0)
         }
+        Core::Edge {
+            centre,
+            direction,
+            half_length,
+        } => {
+            let (c, d) = (origin + rot * centre, rot * direction);
+            (c + segment_minimiser(solid, &c, &d, half_length) * d, 0.0)
+        }
     };
     let (dist, point, normal) = solid.distance(&q);
     let normal = pose_solid.rot * normal;
@@ -211,23 +229,22 @@ pub fn nearest_rim(
         Core::Side(s) | Core::Segment(s) => {
             let d = axis(2);
             let t = segment_minimiser(solid, &origin, &d, s.half_length);
-            // how fast the distance rises along the axis from the nearest point, the slower
-            // way within the segment (0 for a side lying on a face or along another side)
-            let g = |t: f64| solid.distance(&(origin + t * d)).0;
-            let reach = 0.5 * s.half_length;
-            let (up, down) = (t + reach, t - reach);
-            let inward = |x: f64| x.abs() <= s.half_length * (1.0 + 1e-12);
-            let rise = [up, down]
-                .into_iter()
-                .filter(|&x| inward(x))
-                .map(|x| (g(x) - g(t)) / reach)
-                .fold(f64::INFINITY, f64::min)
-                .max(0.0);
+            let rise = slowest_rise(solid, &origin, &d, s.half_length, t);
             if t.abs() < s.half_length || matches!(core, Core::Segment(_)) {
                 // the axis point itself (a capsule's end is its end ball)
                 return Some((Vector3::new(0.0, 0.0, t), rise));
             }
             (t, s.radius, rise)
+        }
+        Core::Edge {
+            centre,
+            direction,
+            half_length,
+        } => {
+            let (c, d) = (origin + rot * centre, rot * direction);
+            let t = segment_minimiser(solid, &c, &d, half_length);
+            let rise = slowest_rise(solid, &c, &d, half_length, t);
+            return Some((centre + t * direction, rise));
         }
         Core::Ball(_) => return None,
     };
@@ -238,6 +255,20 @@ pub fn nearest_rim(
     let sine = normal.cross(&axis(2)).norm();
     let (s, c) = theta.sin_cos();
     Some((Vector3::new(radius * c, radius * s, z), sine.min(rise)))
+}
+
+/// How fast `sd(c + t d)` rises from `t` half a half-length away, the slower way within the
+/// segment (0 for a segment lying flat on a face or along another cylinder's side).
+fn slowest_rise(solid: &Solid, c: &Vector3<f64>, d: &Vector3<f64>, half: f64, t: f64) -> f64 {
+    let g = |t: f64| solid.distance(&(c + t * d)).0;
+    let reach = 0.5 * half;
+    let inward = |x: f64| x.abs() <= half * (1.0 + 1e-12);
+    [t + reach, t - reach]
+        .into_iter()
+        .filter(|&x| inward(x))
+        .map(|x| (g(x) - g(t)) / reach)
+        .fold(f64::INFINITY, f64::min)
+        .max(0.0)
 }
 
 /// `c + r (cos θ u + sin θ v)`.
