@@ -181,6 +181,24 @@ impl Shape {
         }
     }
 
+    /// The segment along z (its half length) and the radius about it of a shape that lies
+    /// within that capsule: a sphere or point (length 0), a capsule, a cylinder.
+    pub fn core_segment(&self) -> Option<(f64, f64)> {
+        match *self {
+            Shape::Sphere { radius } => Some((0.0, radius)),
+            Shape::Point => Some((0.0, 0.0)),
+            Shape::Capsule {
+                radius,
+                half_length,
+            }
+            | Shape::Cylinder {
+                radius,
+                half_length,
+            } => Some((half_length, radius)),
+            _ => None,
+        }
+    }
+
     /// Checks that every dimension is finite and non-negative.
     fn validate(&self) -> Result<(), String> {
         let dims: Vec<f64> = match self {

@@ -231,7 +231,7 @@ fn convex_pair_gap(model: &Model, (ga, gb): (usize, usize), a: &GeomBound, b: &G
         support(sb, &(b.frame.rot.transpose() * -d)),
     );
     let along = dist - ha - hb;
-    match (core_segment(sa), core_segment(sb)) {
+    match (sa.core_segment(), sb.core_segment()) {
         (Some((half_a, ra)), Some((half_b, rb))) if with_cylinder => {
             let axis = |g: &GeomBound| g.frame.rot.column(2).into_owned();
             let (da, db) = (axis(a), axis(b));
@@ -242,25 +242,6 @@ fn convex_pair_gap(model: &Model, (ga, gb): (usize, usize), a: &GeomBound, b: &G
             along.max(cores - ra - rb)
         }
         _ => along,
-    }
-}
-
-/// The segment along its z (half length) and the radius about it of a shape that lies within
-/// that capsule: a sphere or point (length 0), a capsule, a cylinder.
-fn core_segment(shape: &crate::contact::geometry::Shape) -> Option<(f64, f64)> {
-    use crate::contact::geometry::Shape;
-    match *shape {
-        Shape::Sphere { radius } => Some((0.0, radius)),
-        Shape::Point => Some((0.0, 0.0)),
-        Shape::Capsule {
-            radius,
-            half_length,
-        }
-        | Shape::Cylinder {
-            radius,
-            half_length,
-        } => Some((half_length, radius)),
-        _ => None,
     }
 }
 

@@ -25,7 +25,7 @@
 
 use std::sync::Arc;
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 use super::kernels::box_distance;
 use super::{Ball, ConvexHull, GeomPose, Segment, Witness};
@@ -107,6 +107,24 @@ pub enum Core {
 }
 
 impl Core {
+    /// An edge's midpoint and direction in a frame where the core's geom has rotation `rot`
+    /// and origin `origin`, and its half length (a zero-length edge at the origin for other
+    /// cores).
+    fn edge_in(
+        &self,
+        rot: &Matrix3<f64>,
+        origin: &Vector3<f64>,
+    ) -> (Vector3<f64>, Vector3<f64>, f64) {
+        match *self {
+            Core::Edge {
+                centre,
+                direction,
+                half_length,
+            } => (origin + rot * centre, rot * direction, half_length),
+            _ => (*origin, rot.column(2).into_owned(), 0.0),
+        }
+    }
+
     /// How far the witness lies from the core point along the normal (the ball's or segment's
     /// radius; 0 for a rim point).
     pub fn radius(&self) -> f64 {
@@ -189,13 +207,9 @@ pub fn core_solid(
             let theta = rim_minimiser(solid, &centre, &axis(0), &axis(1), radius);
             (rim_point(&centre, &axis(0), &axis(1), radius, theta), 0.0)
         }
-        Core::Edge {
-            centre,
-            direction,
-            half_length,
-        } => {
-            let (c, d) = (origin + rot * centre, rot * direction);
-            (c + segment_minimiser(solid, &c, &d, half_length) * d, 0.0)
+        Core::Edge { .. } => {
+            let (c, d, half) = core.edge_in(&rot, &origin);
+            (c + segment_minimiser(solid, &c, &d, half) * d, 0.0)
         }
     };
     let (dist, point, normal) = solid.distance(&q);
@@ -237,13 +251,11 @@ pub fn nearest_rim(
             (t, s.radius, rise)
         }
         Core::Edge {
-            centre,
-            direction,
-            half_length,
+            centre, direction, ..
         } => {
-            let (c, d) = (origin + rot * centre, rot * direction);
-            let t = segment_minimiser(solid, &c, &d, half_length);
-            let rise = slowest_rise(solid, &c, &d, half_length, t);
+            let (c, d, half) = core.edge_in(&rot, &origin);
+            let t = segment_minimiser(solid, &c, &d, half);
+            let rise = slowest_rise(solid, &c, &d, half, t);
             return Some((centre + t * direction, rise));
         }
         Core::Ball(_) => return None,
