@@ -136,14 +136,23 @@ ROLLER = """<mujoco><option timestep="0.01"/><worldbody><geom type="plane" size=
   </body></worldbody></mujoco>"""
 
 
+SLAB = " ".join(f"{sx * 0.3} {sy * 0.2} {sz * 0.05}"
+                for sx in (1, -1) for sy in (1, -1) for sz in (1, -1))
+MESH_ROLLER = ROLLER.replace('<geom type="box" size="0.3 0.2 0.05" mass="5"/>',
+                             '<geom type="mesh" mesh="slab" mass="5"/>').replace(
+    "<worldbody>", f'<asset><mesh name="slab" vertex="{SLAB}"/></asset><worldbody>')
+
+
+@pytest.mark.parametrize("slab", ["box", "mesh"])
 @pytest.mark.parametrize("yaw", [0, 30])
-def test_a_box_pushed_across_a_roller_rides_on_it(yaw):
+def test_a_box_pushed_across_a_roller_rides_on_it(yaw, slab):
     """A box lying across a roller longer than the box is wide (the roller's rims beyond the
     box), pushed along at 1 m/s: it rides on the roller's side (and seesaws on it) while the
     roller rolls along under it, nothing overlaps and the energy never rises. The contacts are
     where the box's edges cross the roller's top (box edges against the cylinder); without them
-    the box fell through the roller and lay on the floor (its centre at 0.05 m)."""
-    m = load(ROLLER.format(yaw=yaw))
+    the box fell through the roller and lay on the floor (its centre at 0.05 m). The same for
+    a box-shaped mesh (its hull's edges)."""
+    m = load((ROLLER if slab == "box" else MESH_ROLLER).format(yaw=yaw))
     qvel = np.zeros(m.nv)
     qvel[6] = 1.0
     traj = ukemi.rollout(m, m.make_state(qvel=qvel), nsteps=150)

@@ -46,7 +46,7 @@
 //! | sphere / point – cylinder | 1: signed distance of the centre to the cylinder, minus the radius |
 //! | capsule – cylinder | 3: the segment's point nearest the cylinder, and the end spheres |
 //! | box – cylinder | A's corners and A's twelve edges' nearest points against the cylinder; per end disk, the rim's point nearest A and three fixed rim points against A |
-//! | mesh – cylinder | A's hull vertices against the cylinder; per end disk, the rim's point nearest A and three fixed rim points against A |
+//! | mesh – cylinder | A's hull vertices and edges' nearest points against the cylinder; per end disk, the rim's point nearest A and three fixed rim points against A |
 //! | cylinder – cylinder | per end disk of each, the rim's nearest point and three fixed rim points, and each side, against the other |
 //!
 //! The cylinder pairs are a *core* (ball, segment, rim, side) against a convex *solid* (box,
@@ -64,9 +64,8 @@
 //! [`candidates`] reports when it had to exchange the two geoms.
 //!
 //! ## Limitations
-//! Ellipsoids only collide with planes; plane–plane is unsupported. A hull's edge across a
-//! cylinder's side, and a box's or hull's edge across a cylinder's rim, are not detected (as
-//! edge on edge between boxes); deep inside a solid (a rim or segment crossing it) the nearest
+//! Ellipsoids only collide with planes; plane–plane is unsupported. A box's or hull's edge
+//! across a cylinder's rim is not detected (as edge on edge between boxes); deep inside a solid (a rim or segment crossing it) the nearest
 //! point ties two faces and the witness normal is one face's. Capsule–box
 //! and capsule–mesh only test three spheres on the segment, so a capsule crossing a box edge
 //! between them (e.g. a long capsule lying across a box) is not detected. Box–box, box–mesh
@@ -721,10 +720,9 @@ fn solid_cylinder(a: &Shape, b: &Shape) -> Option<Vec<Feature>> {
         .into_iter()
         .chain(box_edges(&half_extents))
         .collect(),
-        Shape::Mesh { ref hull } => hull
-            .vertices
-            .iter()
+        Shape::Mesh { ref hull } => (hull.vertices.iter())
             .map(|&v| Core::Ball(ball(v, 0.0)))
+            .chain(hull_edges(hull))
             .collect(),
         Shape::Cylinder {
             radius,
@@ -859,6 +857,20 @@ fn box_edges(half: &Vector3<f64>) -> impl Iterator<Item = Core> + '_ {
                 half_length: half[k],
             }
         })
+    })
+}
+
+/// The edges of a hull as segment cores (as a box's edges: a slab lying on a roller rests
+/// where its edges cross the roller's top).
+fn hull_edges(hull: &ConvexHull) -> impl Iterator<Item = Core> + '_ {
+    hull.edges().into_iter().map(|(i, j)| {
+        let (a, b) = (hull.vertices[i], hull.vertices[j]);
+        let half = 0.5 * (b - a).norm();
+        Core::Edge {
+            centre: 0.5 * (a + b),
+            direction: (b - a) / (2.0 * half).max(1e-300),
+            half_length: half,
+        }
     })
 }
 

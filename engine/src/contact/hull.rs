@@ -154,6 +154,37 @@ impl ConvexHull {
             .filter(|(_, d)| d.is_finite())
     }
 
+    /// The hull's edges as vertex index pairs `(i, j)`, `i < j`, in order: the sides of its
+    /// triangles between two different planes (a diagonal between coplanar triangles of one
+    /// face is not an edge).
+    pub fn edges(&self) -> Vec<(usize, usize)> {
+        let mut sides: Vec<((usize, usize), usize)> = Vec::new();
+        for (f, t) in self.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                sides.push(((a.min(b), a.max(b)), f));
+            }
+        }
+        sides.sort_unstable();
+        let coplanar = |f: usize, g: usize| {
+            (self.normals[f] - self.normals[g]).amax() < 1e-9
+                && (self.offsets[f] - self.offsets[g]).abs() < 1e-9
+        };
+        let mut edges: Vec<(usize, usize)> = Vec::new();
+        for pair in sides.chunks(2) {
+            // (a closed hull has two triangles on each side; a lone side is kept)
+            let keep = match pair {
+                [(e, f), (e2, g)] if e == e2 => !coplanar(*f, *g),
+                _ => true,
+            };
+            if keep {
+                edges.push(pair[0].0);
+            }
+        }
+        edges.dedup();
+        edges
+    }
+
     /// The largest distance of a vertex from the geom origin (m).
     pub fn radius(&self) -> f64 {
         self.radius
@@ -392,6 +423,23 @@ mod tests {
             pts.push(Vector3::new(0.2 * half.x, -half.y, 0.5 * half.z));
         }
         pts
+    }
+
+    /// A box's hull has its twelve edges (not the faces' diagonals), a tetrahedron six, and
+    /// every edge joins two vertices at the box's edge length.
+    #[test]
+    fn hull_edges_leave_out_face_diagonals() {
+        let half = Vector3::new(0.1, 0.2, 0.3);
+        let hull = ConvexHull::new(&cube_points(&half, true)).unwrap();
+        let edges = hull.edges();
+        assert_eq!(edges.len(), 12, "{edges:?}");
+        for (i, j) in edges {
+            let d = (hull.vertices[i] - hull.vertices[j]).abs();
+            let along = (0..3).filter(|&k| d[k] > 1e-12).count();
+            assert_eq!(along, 1, "edge {i}-{j} is a diagonal: {d:?}");
+        }
+        let tetra = [Vector3::zeros(), Vector3::x(), Vector3::y(), Vector3::z()];
+        assert_eq!(ConvexHull::new(&tetra).unwrap().edges().len(), 6);
     }
 
     /// A box's hull is its eight corners in input order (the interior point and the points
