@@ -198,9 +198,11 @@ impl Shape {
         }
     }
 
-    /// Checks that every dimension is finite and non-negative.
-    fn validate(&self) -> Result<(), String> {
-        let dims: Vec<f64> = match self {
+    /// The shape's sizes in the order MJCF's `geom size` lists them (m): a sphere's radius; a
+    /// capsule's or cylinder's radius and half length; a box's half extents; an ellipsoid's
+    /// radii; none for a plane, a point or a mesh (its hull is its shape).
+    pub fn sizes(&self) -> Vec<f64> {
+        match self {
             Shape::Plane | Shape::Point | Shape::Mesh { .. } => Vec::new(),
             Shape::Sphere { radius } => vec![*radius],
             Shape::Capsule {
@@ -210,13 +212,16 @@ impl Shape {
             | Shape::Cylinder {
                 radius,
                 half_length,
-            } => {
-                vec![*radius, *half_length]
-            }
+            } => vec![*radius, *half_length],
             Shape::Box { half_extents: v } | Shape::Ellipsoid { radii: v } => {
                 v.iter().copied().collect()
             }
-        };
+        }
+    }
+
+    /// Checks that every dimension is finite and non-negative.
+    fn validate(&self) -> Result<(), String> {
+        let dims = self.sizes();
         if dims.iter().all(|d| d.is_finite() && *d >= 0.0) {
             Ok(())
         } else {

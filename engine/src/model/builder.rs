@@ -772,21 +772,8 @@ fn pair_model(a: ContactModel, b: ContactModel, friction: f64) -> ContactModel {
 }
 
 fn check_shape(shape: &Shape, field: &str) -> Result<()> {
-    let sizes: Vec<f64> = match shape {
-        // (a mesh's hull was checked when it was built)
-        Shape::Plane | Shape::Point | Shape::Mesh { .. } => vec![],
-        Shape::Sphere { radius } => vec![*radius],
-        Shape::Capsule {
-            radius,
-            half_length,
-        }
-        | Shape::Cylinder {
-            radius,
-            half_length,
-        } => vec![*radius, *half_length],
-        Shape::Box { half_extents } => half_extents.as_slice().to_vec(),
-        Shape::Ellipsoid { radii } => radii.as_slice().to_vec(),
-    };
+    // (a mesh's hull was checked when it was built: it has no sizes)
+    let sizes = shape.sizes();
     ensure!(
         sizes.iter().all(|x| x.is_finite() && *x > 0.0),
         Error::model(field, &sizes, "sizes must be finite and > 0")

@@ -52,25 +52,6 @@ pub(crate) enum Param {
     Timestep,
 }
 
-/// Sizes of a shape, in the order `geom_size` lists them (m).
-fn shape_sizes(shape: &Shape) -> Vec<f64> {
-    match shape {
-        // (a mesh has no size parameters: its hull is its shape)
-        Shape::Plane | Shape::Point | Shape::Mesh { .. } => vec![],
-        Shape::Sphere { radius } => vec![*radius],
-        Shape::Capsule {
-            radius,
-            half_length,
-        }
-        | Shape::Cylinder {
-            radius,
-            half_length,
-        } => vec![*radius, *half_length],
-        Shape::Box { half_extents } => half_extents.iter().copied().collect(),
-        Shape::Ellipsoid { radii } => radii.iter().copied().collect(),
-    }
-}
-
 fn set_shape_size(shape: &mut Shape, i: usize, v: f64) {
     match shape {
         Shape::Plane | Shape::Point | Shape::Mesh { .. } => {}
@@ -103,7 +84,7 @@ impl Model {
             p.push(Param::Friction(g));
         }
         for g in (0..self.geoms.len()).filter(|&g| colliding(g)) {
-            let n = shape_sizes(&self.geoms[g].shape).len();
+            let n = self.geoms[g].shape.sizes().len();
             p.extend((0..n).map(|i| Param::Size(g, i)));
             p.extend((0..3).map(|i| Param::GeomPos(g, i)));
         }
@@ -199,7 +180,7 @@ impl Model {
             Param::Mass(b) => self.bodies[b].mass,
             Param::Inertia(b, i, k) => self.bodies[b].inertia[(i, k)],
             Param::Friction(g) => self.geoms[g].friction,
-            Param::Size(g, i) => shape_sizes(&self.geoms[g].shape)[i],
+            Param::Size(g, i) => self.geoms[g].shape.sizes()[i],
             Param::GeomPos(g, i) => self.geoms[g].pos[i],
             Param::Stiffness(j, d) => self.joints[j].stiffness[d],
             Param::Damping(j, d) => self.joints[j].damping[d],
