@@ -9,7 +9,7 @@
 //! are all the solver needs: the minimiser is found to round-off, never approximated.
 //!
 //! * Segment: `g(t) = sd(c + t d)` is convex in `t`, and `g'(t) = n(t) · d` with `n` the
-//!   solid's outward normal at the witness. The minimiser is found by bisection on the sign of
+//!   solid's outward normal at the witness. The minimiser is found by a safeguarded root search on the sign of
 //!   `g'` (robust at the kinks of `sd`). Where `g` is flat (a segment parallel to a face) the
 //!   minimiser nearest the segment's centre is taken, so that it does not wander with the
 //!   round-off of `g'`.
@@ -18,7 +18,7 @@
 //!   capsule's surface point lies on the side). At an end of the axis the candidate is that
 //!   end's disk rim instead (the two agree where they meet).
 //! * Rim: `g(θ) = sd(c + r (cos θ u + sin θ v))` is not convex on the circle; the best of
-//!   [`RIM_SAMPLES`] angles brackets the minimiser, refined by bisection on `g'(θ)`. A disk
+//!   [`RIM_SAMPLES`] angles brackets the minimiser, refined by the same search on `g'(θ)`. A disk
 //!   lying flat on a face has a flat `g`: the sampled angle is kept (and such a rim is frozen
 //!   for the step by the caller, as the disk–plane rim is, see
 //!   [`crate::contact::disk_rim_for_step`]).
@@ -37,7 +37,8 @@ const MIN_NORM: f64 = 1e-100;
 /// the exact one by at most this times its distance, far below the solver's tolerances.
 const FLAT_SLOPE: f64 = 1e-12;
 
-/// Bisection steps of the minimisers: enough to reach round-off on any bracket.
+/// Most steps of a minimiser's root search ([`first_rise`]): enough to reach round-off by
+/// bisection alone on any bracket.
 const BISECTIONS: usize = 64;
 
 /// Angles sampled around a rim before its minimiser is refined.
@@ -299,7 +300,7 @@ fn rim_point(
 /// true for a monotone predicate on the slope `slope(x)` (`rising(x) = slope(x) ≥ −tol`):
 /// regula falsi with the Illinois weighting on `slope`, every other step a bisection unless the
 /// bracket at least halved, to round-off. About ten evaluations where `slope` is smooth (64
-/// bisections before: the A1's cylinder candidates made its step 30% slower).
+/// bisections before; it did not measurably change the A1's step).
 fn first_rise(slope: impl Fn(f64) -> f64, tol: f64, hi: f64) -> f64 {
     let (mut lo, mut hi) = (0.0, hi);
     let (mut s_lo, mut s_hi) = (slope(lo) + tol, slope(hi) + tol); // < 0 at lo, ≥ 0 at hi
@@ -359,7 +360,7 @@ fn segment_minimiser(solid: &Solid, c: &Vector3<f64>, d: &Vector3<f64>, half: f6
 }
 
 /// The angle minimising `sd` over the rim `c + r (cos θ u + sin θ v)`: the best of
-/// [`RIM_SAMPLES`] angles (the first on ties), refined by bisection on `g'(θ)` between its
+/// [`RIM_SAMPLES`] angles (the first on ties), refined by [`first_rise`] on `g'(θ)` between its
 /// neighbours.
 fn rim_minimiser(
     solid: &Solid,
