@@ -1,6 +1,6 @@
 """torch.autograd.gradcheck and jax check_grads on ukemi.torch / ukemi.jax steps and rollouts
-for a pendulum, a cartpole, a box sliding on the floor and gymnasium's hopper standing on the
-floor, with respect to state, controls and parameters (the contact scenes in a fixed active set,
+for a pendulum, a cartpole, a box sliding on the floor, gymnasium's hopper standing on the
+floor and a cube resting on a box on its edge crossings, with respect to state, controls and parameters (the contact scenes in a fixed active set,
 where the hard step is smooth, so the exact gradient, kappa_grad=None, must match finite
 differences)."""
 
@@ -66,7 +66,26 @@ def hopper():
     return m, np.concatenate([s.qpos, s.qvel])
 
 
-SCENES = {"pendulum": pendulum, "cartpole": cartpole, "sliding_box": sliding_box, "hopper": hopper}
+def turned_cube():
+    """A cube resting on a box's top turned 30° about the vertical: every corner lies beyond
+    the other's face, so the eight crossings of their edges hold it (box_edges.rs)."""
+    b = ukemi.ModelBuilder(timestep=0.01)
+    b.add_geom("table", body="world", shape="box", size=(0.1, 0.1, 0.1), pos=(0, 0, 0.1))
+    c, s = np.cos(np.pi / 12), np.sin(np.pi / 12)
+    b.add_body("cube", mass=1.0, inertia=(1 / 150, 1 / 150, 1 / 150), pos=(0.01, 0, 0.3005),
+               quat=(c, 0, 0, s))
+    b.add_joint("free", kind="floating", parent="world", child="cube")
+    b.add_geom("cube", body="cube", shape="box", size=(0.1, 0.1, 0.1), friction=0.5)
+    b.add_actuator("push", joint="free", gear=1.0)
+    m = tight(b.compile())
+    s = m.make_state()
+    for _ in range(30):
+        s, _ = ukemi.step(m, s, [0.0])
+    return m, np.concatenate([s.qpos, s.qvel])
+
+
+SCENES = {"pendulum": pendulum, "cartpole": cartpole, "sliding_box": sliding_box, "hopper": hopper,
+          "turned_cube": turned_cube}
 
 
 @pytest.mark.parametrize("name", list(SCENES))

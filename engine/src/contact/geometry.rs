@@ -37,7 +37,7 @@
 //! | capsule – capsule | 3: segment–segment closest points, each end of A against B's segment |
 //! | sphere / point – box | 1: signed distance of the centre to the box, minus the radius |
 //! | capsule – box | 3: end spheres and the midpoint sphere against the box |
-//! | box – box | 16: each corner of A against B, each corner of B against A |
+//! | box – box | 24: each corner of A against B, each corner of B against A, and eight slots for the points where an edge of A crosses an edge of B (`pairs/box_edges.rs`) |
 //! | mesh – plane | one per hull vertex |
 //! | sphere / point – mesh | 1: signed distance of the centre to the hull, minus the radius |
 //! | capsule – mesh | 3: end spheres and the midpoint sphere against the hull |
@@ -65,14 +65,14 @@
 //!
 //! ## Limitations
 //! Ellipsoids only collide with planes; plane–plane is unsupported. A box's or hull's edge
-//! across a cylinder's rim is not detected (as edge on edge between boxes); deep inside a solid (a rim or segment crossing it) the nearest
-//! point ties two faces and the witness normal is one face's. Capsule–box
-//! and capsule–mesh only test three spheres on the segment, so a capsule crossing a box edge
-//! between them (e.g. a long capsule lying across a box) is not detected. Box–box, box–mesh
-//! and mesh–mesh only test vertices, so edge–edge contact (two boxes crossed edge on edge) is
-//! not detected. Capsule–capsule tests
-//! the ends of A only, so parallel capsules are supported at two points only where A's ends
-//! lie alongside B's segment.
+//! across a cylinder's rim is not detected; deep inside a solid (a rim or segment crossing it)
+//! the nearest point ties two faces and the witness normal is one face's. Capsule–box and
+//! capsule–mesh only test three spheres on the segment, so a capsule crossing a box edge
+//! between them (e.g. a long capsule lying across a box) is not detected. Box–mesh and
+//! mesh–mesh only test vertices, so edge–edge contact there (a box turned on a mesh cube) is
+//! not detected (box–box has its edge crossings). Capsule–capsule tests the ends of A only,
+//! so parallel capsules are supported at two points only where A's ends lie alongside B's
+//! segment.
 //!
 //! ## Degenerate configurations
 //! `evaluate` never panics and returns finite values for finite poses and shapes. Where the
@@ -93,6 +93,9 @@ mod kernels;
 
 #[path = "pairs/convex.rs"]
 mod convex;
+
+#[path = "pairs/box_edges.rs"]
+pub mod box_edges;
 
 pub use convex::{Core, Solid, cylinder_distance};
 
@@ -368,6 +371,16 @@ pub enum Feature {
         /// The core of B.
         b: Core,
     },
+    /// One of a box pair's [`box_edges::EDGE_SLOTS`] edge crossings: an edge of box A across
+    /// an edge of box B ([`box_edges`]).
+    BoxEdge {
+        /// Which of the pair's crossings (ordered by their edges).
+        slot: u8,
+        /// Half extents of box A.
+        half_extents_a: Vector3<f64>,
+        /// Half extents of box B.
+        half_extents_b: Vector3<f64>,
+    },
 }
 
 /// Evaluated candidate.
@@ -447,6 +460,17 @@ pub fn evaluate(
         }
         Feature::CoreSolid { a, b } => convex::core_solid(a, pose_a, b, pose_b),
         Feature::SolidCore { a, b } => convex::core_solid(b, pose_b, a, pose_a).swapped(),
+        Feature::BoxEdge {
+            slot,
+            half_extents_a,
+            half_extents_b,
+        } => box_edges::slot_witness(
+            usize::from(*slot),
+            half_extents_a,
+            pose_a,
+            half_extents_b,
+            pose_b,
+        ),
     }
 }
 
@@ -723,7 +747,7 @@ fn solid_cylinder(a: &Shape, b: &Shape) -> Option<Vec<Feature>> {
         Shape::Box { half_extents } => (box_corners(&half_extents)
             .map(|c| Core::Ball(ball(c, 0.0))))
         .into_iter()
-        .chain(box_edges(&half_extents))
+        .chain(box_edge_cores(&half_extents))
         .collect(),
         Shape::Mesh { ref hull } => (hull.vertices.iter())
             .map(|&v| Core::Ball(ball(v, 0.0)))
@@ -835,7 +859,8 @@ fn hull_hull(hull_a: &Arc<ConvexHull>, hull_b: &Arc<ConvexHull>) -> Vec<Feature>
     a_in_b.chain(b_in_a).collect()
 }
 
-/// Box against box: the corners of A against B, then the corners of B against A.
+/// Box against box: the corners of A against B, the corners of B against A, then the slots of
+/// the edge crossings ([`box_edges`]).
 fn box_box(half_a: &Vector3<f64>, half_b: &Vector3<f64>) -> Vec<Feature> {
     let a_in_b = box_corners(half_a).map(|c| Feature::SphereBox {
         a: ball(c, 0.0),
@@ -845,23 +870,23 @@ fn box_box(half_a: &Vector3<f64>, half_b: &Vector3<f64>) -> Vec<Feature> {
         half_extents_a: *half_a,
         b: ball(c, 0.0),
     });
-    a_in_b.into_iter().chain(b_in_a).collect()
+    let crossings = (0..box_edges::EDGE_SLOTS as u8).map(|slot| Feature::BoxEdge {
+        slot,
+        half_extents_a: *half_a,
+        half_extents_b: *half_b,
+    });
+    (a_in_b.into_iter().chain(b_in_a).chain(crossings)).collect()
 }
 
-/// The twelve edges of a box as segment cores: for each axis, the four edges along it.
-fn box_edges(half: &Vector3<f64>) -> impl Iterator<Item = Core> + '_ {
-    (0..3).flat_map(move |k| {
-        let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-        [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)].map(|(si, sj)| {
-            let mut centre = Vector3::zeros();
-            centre[i] = si * half[i];
-            centre[j] = sj * half[j];
-            Core::Edge {
-                centre,
-                direction: Vector3::ith(k, 1.0),
-                half_length: half[k],
-            }
-        })
+/// The twelve edges of a box as segment cores ([`box_edges::box_edge`]'s order).
+fn box_edge_cores(half: &Vector3<f64>) -> impl Iterator<Item = Core> + '_ {
+    (0..12).map(move |e| {
+        let (centre, direction, half_length) = box_edges::box_edge(half, e);
+        Core::Edge {
+            centre,
+            direction,
+            half_length,
+        }
     })
 }
 

@@ -663,7 +663,13 @@ impl ModelBuilder {
                 add_candidates(&mut out, geoms, joints, (i, j), friction, model)?;
             }
         }
-        Ok(out)
+        // box pairs' edge-crossing slots last (each pair's consecutive): most are empty at any
+        // step, and the solver's loops skip runs of inactive candidates as a whole
+        let (mut kept, slots): (Vec<Contact>, Vec<Contact>) = out
+            .into_iter()
+            .partition(|c| !matches!(c.feature, geometry::Feature::BoxEdge { .. }));
+        kept.extend(slots);
+        Ok(kept)
     }
 
     fn compile_actuators(&self, joints: &[Joint], bodies: &[Body]) -> Result<Vec<Actuator>> {

@@ -171,8 +171,13 @@ impl Topology {
             leaves.push(dims.len());
             dims.push(c.model.dim());
             contact_bodies.push([geoms[c.geom_a].body, geoms[c.geom_b].body]);
-            let (o, q) = c.model.cones();
-            cone_degree += o + q;
+            // (a box pair's edge-crossing slots are not counted: most hold nothing, and the
+            // degree sets the interior-point centring of every step, so adding them would have
+            // moved every box model's steps)
+            if !matches!(c.feature, crate::contact::geometry::Feature::BoxEdge { .. }) {
+                let (o, q) = c.model.cones();
+                cone_degree += o + q;
+            }
         }
         // tendon limits: inequality nodes, but eliminated with the couplings (they touch
         // several joints' bodies: as leaves they would fill in between all of them)

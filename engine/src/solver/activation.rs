@@ -62,7 +62,8 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
             posed = true;
         }
         let [a, b] = [contact.geom_a, contact.geom_b].map(|g| &poses[g]);
-        prepare_candidate_at(model, ws, c, (a, b), &mut memo);
+        let inactive = !ws.active[c];
+        prepare_candidate_at(model, ws, c, (a, b), &mut memo, inactive);
     }
     ws.geom_poses = poses;
 }
@@ -308,7 +309,7 @@ pub(crate) fn prepare_candidates_holding(
     for (c, frozen) in candidates {
         let contact = &model.contacts[c];
         let (a, b) = (poses_of(contact.geom_a), poses_of(contact.geom_b));
-        prepare_candidate_at(model, ws, c, (&a, &b), &mut memo);
+        prepare_candidate_at(model, ws, c, (&a, &b), &mut memo, false);
         ws.frozen[c] = frozen;
     }
 }
@@ -325,16 +326,19 @@ fn prepare_candidate_with(
     let contact = &model.contacts[c];
     let [a, b] = [contact.geom_a, contact.geom_b]
         .map(|g| GeomPoses::of(model, state, &model.geoms[g], None));
-    prepare_candidate_at(model, ws, c, (&a, &b), memo);
+    prepare_candidate_at(model, ws, c, (&a, &b), memo, false);
 }
 
-/// [`prepare_candidate_with`] with the poses and velocities of the candidate's geoms.
+/// [`prepare_candidate_with`] with the poses and velocities of the candidate's geoms; with
+/// `skip_empty`, an edge slot that holds no crossing this step is left unprepared (see
+/// below).
 fn prepare_candidate_at(
     model: &Model,
     ws: &mut Workspace,
     c: usize,
     (a, b): (&GeomPoses, &GeomPoses),
     memo: &mut crate::contact::BoxPairMemo,
+    skip_empty: bool,
 ) {
     let contact = &model.contacts[c];
     ws.frozen[c] = crate::contact::freeze_for_step_at(
@@ -342,10 +346,21 @@ fn prepare_candidate_at(
         &model.geoms,
         (&a.now, &b.now),
         (&a.ahead, &b.ahead),
+        candidate_margin(model, contact),
         memo,
     );
     let w =
         crate::contact::witness_frozen_at(contact, &model.geoms, (&a.now, &b.now), ws.frozen[c]);
+    if skip_empty && ws.frozen[c] == Some(Frozen::NoCrossing) {
+        // an empty edge slot takes no part in the step (`activate`): its frame is built only
+        // if a solve activates every candidate (`ensure_prepared`). Why: the Panda's 25
+        // finger-pad pairs have 200 slots, all empty, and building their frames every step
+        // was a third of what the slots cost it.
+        ws.prepared[c] = false;
+        ws.contact_phi_now[c] = w.phi;
+        ws.contact_rate_now[c] = 0.0;
+        return;
+    }
     ws.prepared[c] = true;
     ws.contact_phi_now[c] = w.phi;
     // φ̇ = n · (velocity of A's witness − velocity of B's witness), n from B to A
@@ -418,6 +433,10 @@ pub(crate) fn activate(model: &Model, state: &State, ws: &mut Workspace, reach: 
             lowest = (reach == Reach::Approach && run.len() >= LOWEST_OF)
                 .then(|| lowest_candidate(ws, run.clone()))
                 .flatten();
+        }
+        // (an edge slot without a crossing this step has nothing to hold)
+        if matches!(ws.frozen[c], Some(Frozen::NoCrossing)) {
+            continue;
         }
         let margin = candidate_margin(model, contact);
         let speed = match reach {
@@ -805,6 +824,15 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
         if ws.active[c] || ws.shadowed[c] {
             continue;
         }
+        // (an empty edge slot, or one left out of the step's preparation, holds no crossing:
+        // a crossing the step brought in is found by `refreeze_crossings`, pair by pair)
+        let slot = matches!(
+            contact.feature,
+            crate::contact::geometry::Feature::BoxEdge { .. }
+        );
+        if slot && matches!(ws.frozen[c], None | Some(Frozen::NoCrossing)) {
+            continue;
+        }
         let floor = 0.25 * candidate_margin(model, contact);
         // far apart by the geoms' bounding spheres: no narrow phase (a frozen feature is
         // measured against its own plane, which such a bound does not cover)
@@ -851,6 +879,73 @@ pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
             ws.frozen[c] = crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true)
                 .map(Frozen::Rim);
             n += 1;
+        }
+    }
+    n
+}
+
+/// Penetration (m) of an edge crossing that a solve did not hold (the crossings were found at
+/// the predicted poses) before it is brought into the step and the step solved again.
+const CROSSING_REFREEZE_TOL: f64 = 1e-10;
+
+/// After a solve: every box pair's edge crossing that penetrates at the new configuration
+/// and that none of the pair's edge slots holds is put in a free slot, active (the step must
+/// then be solved again); returns how many were. A slot outside the step's activation is
+/// prepared first, so that preparing it later does not replace the crossing. The crossings
+/// are found at the step's predicted poses ([`crate::contact::freeze_for_step`]); a box
+/// knocked over by the step crosses edges the prediction did not.
+pub(crate) fn refreeze_crossings(model: &Model, state: &State, ws: &mut Workspace) -> usize {
+    use crate::contact::geometry::{Feature, box_edges};
+    let mut n = 0;
+    let mut c = 0;
+    let mut memo = crate::contact::BoxPairMemo::default();
+    while c < model.ncontact() {
+        let contact = &model.contacts[c];
+        let Feature::BoxEdge {
+            half_extents_a: ha,
+            half_extents_b: hb,
+            ..
+        } = &contact.feature
+        else {
+            c += 1;
+            continue;
+        };
+        let same_pair = |k: &usize| {
+            let other = &model.contacts[*k];
+            (other.geom_a, other.geom_b) == (contact.geom_a, contact.geom_b)
+                && matches!(other.feature, Feature::BoxEdge { .. })
+        };
+        let slots: Vec<usize> = (c..model.ncontact()).take_while(|k| same_pair(k)).collect();
+        c += slots.len();
+        let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
+        // (bounding spheres at the new poses, from `missed_contacts`: apart, nothing crosses)
+        if ws.geom_bounds[contact.geom_a].gap(&ws.geom_bounds[contact.geom_b]) > 0.0 {
+            continue;
+        }
+        let pa = ga.world_pose(&next_pose(&ws.next_pose, ga.body));
+        let pb = gb.world_pose(&next_pose(&ws.next_pose, gb.body));
+        if crate::contact::geometry::box_box_axis(ha, &pa, hb, &pb).0 > 0.0 {
+            continue; // apart along a face normal: nothing crosses
+        }
+        let found = box_edges::crossings(ha, &pa, hb, &pb);
+        for x in (0..box_edges::EDGE_SLOTS).filter_map(|k| found.slot(k)) {
+            let held = |k: &usize| matches!(ws.frozen[*k], Some(Frozen::Crossing { a, b, .. }) if (a, b) == (x.a, x.b));
+            if x.phi >= -CROSSING_REFREEZE_TOL || slots.iter().any(held) {
+                continue;
+            }
+            for &k in &slots {
+                if !ws.prepared[k] {
+                    prepare_candidate_with(model, state, ws, k, &mut memo);
+                }
+            }
+            let free = slots
+                .iter()
+                .find(|&&k| matches!(ws.frozen[k], Some(Frozen::NoCrossing) | None));
+            if let Some(&k) = free {
+                ws.frozen[k] = Some(crate::contact::crossing_frozen(Some(x)));
+                ws.active[k] = true;
+                n += 1;
+            }
         }
     }
     n

@@ -978,9 +978,20 @@ pub(crate) struct FarPairs {
 impl FarPairs {
     /// The pairs of every candidate and limit not active in `active`, with product `product`.
     pub fn left_out(model: &Model, active: &[bool], product: f64) -> FarPairs {
+        // (a box pair's edge-crossing slots are not pairs of the problem's degree either,
+        // [`crate::model::topology::Topology::cone_degree`])
+        let slot = |c: usize| {
+            c < model.ncontact()
+                && matches!(
+                    model.contacts[c].feature,
+                    crate::contact::geometry::Feature::BoxEdge { .. }
+                )
+        };
+        let every: Vec<bool> = (0..active.len()).map(|c| !slot(c)).collect();
+        let taking: Vec<bool> = (0..active.len()).map(|c| active[c] && !slot(c)).collect();
         let mut count = 0usize;
-        for_each_pair(model, &vec![true; active.len()], |_, _, _, _, _| count += 1);
-        for_each_pair(model, active, |_, _, _, _, _| count -= 1);
+        for_each_pair(model, &every, |_, _, _, _, _| count += 1);
+        for_each_pair(model, &taking, |_, _, _, _, _| count -= 1);
         FarPairs {
             count: count as f64,
             product,

@@ -1,0 +1,386 @@
+//! Box–box edge crossings: the contact points where an edge of one box crosses an edge of the
+//! other ([`super::Feature::BoxEdge`]).
+//!
+//! A box pair's corner candidates hold a box only where a corner meets the other box. Two boxes
+//! whose edges cross (a cube dropped edge-down across another's edge), or whose faces meet with
+//! every corner outside the other's face (a cube stacked on an equal cube turned about the
+//! vertical by any angle), touch only at edge crossings: without them the upper box fell
+//! through the lower one. The crossings of a pair are the vertices of its contact polygon that
+//! are not corners, at most eight (two convex quadrilaterals' boundaries cross at most eight
+//! times), so each box pair carries [`EDGE_SLOTS`] edge candidates.
+//!
+//! Which crossings ([`crossings`]): for each of the nine pairs of edge directions (A's axis
+//! `i`, B's axis `j`, not near parallel), the axis `n = ±(a_i × b_j)/|a_i × b_j|` oriented from
+//! B towards A (by the boxes' centres), and the edges that support each box along it: B's edge
+//! along `b_j` farthest along `n`, A's along `a_i` farthest along `−n` (both edges of a box where
+//! the face between them is level with `n` within [`TIE`], as where two faces meet flat). A
+//! supporting pair is a crossing when the two edge lines' closest points are interior to both
+//! edges; its signed distance is then `φ = n · (c_a − c_b)` (any points of the two lines: `n`
+//! is normal to both), and not deeper than either box's half thickness along `n` (deeper, the
+//! edges pass each other outside the boxes). The slots hold the deepest eight, ordered by
+//! their edges' indices so that a pair's slot stays put while its crossings do.
+//!
+//! For a step, each slot is held at its pair of edges and orientation ([`super::super::Frozen`]):
+//! the distance of two fixed lines along their common normal, a smooth function of the poses,
+//! with the lines' closest points as witnesses (exact by the envelope theorem: `δφ = n · (δx_a
+//! − δx_b)` at those points). An empty slot is measured as [`apart`]: never near, never active.
+
+use nalgebra::Vector3;
+
+use super::{GeomPose, Witness};
+
+/// Edge candidates per box pair: a contact polygon has at most eight crossings.
+pub const EDGE_SLOTS: usize = 8;
+
+/// Below this sine two edge directions count as parallel (their lines' closest points are
+/// ill-conditioned; a corner meets the other box where parallel edges end).
+const PARALLEL: f64 = 1e-2;
+
+/// Where `|n · e_k|` of a box's face normal `e_k` is below this, both edges beside that face
+/// support the box along `n` (the face is level with the crossing's plane: flush faces).
+const TIE: f64 = 1e-3;
+
+/// A crossing must lie this far (relative to the half length) inside both edges; nearer an end
+/// the corner there is the contact (a corner candidate).
+const INTERIOR: f64 = 1e-6;
+
+/// Edge `e` (0..12) of a box of half extents `half`, in its frame: `(midpoint, unit direction,
+/// half length)`. Edges `4k..4k + 4` run along axis `k`, at the signs `(+, +), (+, −), (−, +),
+/// (−, −)` of the axes `(k + 1) % 3` and `(k + 2) % 3`.
+pub fn box_edge(half: &Vector3<f64>, e: usize) -> (Vector3<f64>, Vector3<f64>, f64) {
+    let k = e / 4;
+    let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+    let si = if e % 4 < 2 { 1.0 } else { -1.0 };
+    let sj = if e % 2 == 0 { 1.0 } else { -1.0 };
+    let mut centre = Vector3::zeros();
+    centre[i] = si * half[i];
+    centre[j] = sj * half[j];
+    (centre, Vector3::ith(k, 1.0), half[k])
+}
+
+/// The index of the edge along axis `k` at the signs `si`, `sj` of axes `(k + 1) % 3`, `(k +
+/// 2) % 3` (see [`box_edge`]).
+fn edge_index(k: usize, si: f64, sj: f64) -> usize {
+    4 * k + if si > 0.0 { 0 } else { 2 } + if sj > 0.0 { 0 } else { 1 }
+}
+
+/// One edge crossing of a box pair: A's edge `a`, B's edge `b` ([`box_edge`] indices), the
+/// orientation `sign` of the normal `n = sign (a_i × b_j)/|a_i × b_j|` (from B towards A) and
+/// the signed distance at the poses it was found at.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Crossing {
+    /// A's edge.
+    pub a: u8,
+    /// B's edge.
+    pub b: u8,
+    /// Orientation of the normal (±1).
+    pub sign: f64,
+    /// Signed distance (m) where found.
+    pub phi: f64,
+}
+
+/// The crossings of a box pair in slot order (at most [`EDGE_SLOTS`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Crossings {
+    found: [Option<Crossing>; EDGE_SLOTS],
+}
+
+impl Crossings {
+    /// The crossing held by `slot`, if any.
+    pub fn slot(&self, slot: usize) -> Option<Crossing> {
+        self.found.get(slot).copied().flatten()
+    }
+
+    /// Whether some slot holds the crossing of edges `a` and `b`.
+    pub fn holds(&self, a: u8, b: u8) -> bool {
+        self.found.iter().flatten().any(|c| c.a == a && c.b == b)
+    }
+}
+
+/// An edge's world midpoint, direction and half length.
+fn world_edge(half: &Vector3<f64>, pose: &GeomPose, e: usize) -> (Vector3<f64>, Vector3<f64>, f64) {
+    let (c, d, h) = box_edge(half, e);
+    (pose.transform_point(&c), pose.rot * d, h)
+}
+
+/// Parameters `(s, t)` of the closest points `c_a + s d_a`, `c_b + t d_b` of two lines with
+/// unit, non-parallel directions.
+fn line_params(
+    (ca, da): (&Vector3<f64>, &Vector3<f64>),
+    (cb, db): (&Vector3<f64>, &Vector3<f64>),
+) -> (f64, f64) {
+    let r = ca - cb;
+    let (b, d, e) = (da.dot(db), da.dot(&r), db.dot(&r));
+    let denom = 1.0 - b * b;
+    ((b * e - d) / denom, (e - b * d) / denom)
+}
+
+/// Half the thickness of a box along the unit direction `u`.
+fn half_thickness(half: &Vector3<f64>, pose: &GeomPose, u: &Vector3<f64>) -> f64 {
+    (0..3)
+        .map(|k| half[k] * u.dot(&pose.rot.column(k)).abs())
+        .sum()
+}
+
+/// The signs of the two other axes of a box's edge along axis `k` that support it along `u`:
+/// one sign per axis, or both where the face between them is level with `u` ([`TIE`]).
+fn supporting_signs(pose: &GeomPose, k: usize, u: &Vector3<f64>) -> [&'static [f64]; 2] {
+    let side = |axis: usize| -> &'static [f64] {
+        let t = u.dot(&pose.rot.column(axis));
+        if t > TIE {
+            &[1.0]
+        } else if t < -TIE {
+            &[-1.0]
+        } else {
+            &[1.0, -1.0]
+        }
+    };
+    [side((k + 1) % 3), side((k + 2) % 3)]
+}
+
+/// The edge crossings of boxes A and B at these poses (see the module's documentation).
+pub fn crossings(
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+) -> Crossings {
+    let centres = pose_a.pos - pose_b.pos;
+    // (at most 9 direction pairs × 4 supporting pairs)
+    let mut found: [Option<Crossing>; 36] = [None; 36];
+    let mut count = 0;
+    for i in 0..3 {
+        let da = pose_a.rot.column(i).into_owned();
+        for j in 0..3 {
+            let db = pose_b.rot.column(j).into_owned();
+            let cross = da.cross(&db);
+            let sine = cross.norm();
+            if sine < PARALLEL {
+                continue;
+            }
+            let sign = if cross.dot(&centres) >= 0.0 {
+                1.0
+            } else {
+                -1.0
+            };
+            let n = cross * (sign / sine);
+            let deepest =
+                -half_thickness(half_a, pose_a, &n).min(half_thickness(half_b, pose_b, &n));
+            let [a1, a2] = supporting_signs(pose_a, i, &-n);
+            let [b1, b2] = supporting_signs(pose_b, j, &n);
+            for &sa1 in a1 {
+                for &sa2 in a2 {
+                    let ea = edge_index(i, sa1, sa2);
+                    let (ca, da, ha) = world_edge(half_a, pose_a, ea);
+                    for &sb1 in b1 {
+                        for &sb2 in b2 {
+                            let eb = edge_index(j, sb1, sb2);
+                            let (cb, db, hb) = world_edge(half_b, pose_b, eb);
+                            let (s, t) = line_params((&ca, &da), (&cb, &db));
+                            let inside =
+                                s.abs() < ha * (1.0 - INTERIOR) && t.abs() < hb * (1.0 - INTERIOR);
+                            let phi = n.dot(&(ca - cb));
+                            if inside && phi > deepest {
+                                found[count] = Some(Crossing {
+                                    a: ea as u8,
+                                    b: eb as u8,
+                                    sign,
+                                    phi,
+                                });
+                                count += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let found = &mut found[..count];
+    // the deepest eight, then in the order of their edges
+    found.sort_by(|x, y| {
+        let (x, y) = (x.unwrap(), y.unwrap());
+        x.phi.total_cmp(&y.phi).then((x.a, x.b).cmp(&(y.a, y.b)))
+    });
+    let kept = &mut found[..count.min(EDGE_SLOTS)];
+    kept.sort_by_key(|c| c.map(|c| (c.a, c.b)));
+    let mut out = Crossings::default();
+    out.found[..kept.len()].copy_from_slice(kept);
+    out
+}
+
+/// The crossing of A's edge `a` and B's edge `b` held for a step: the distance of the two
+/// edges' lines along `n = sign (d_a × d_b)/|d_a × d_b|`, with the lines' closest points as the
+/// witnesses. Edges turned parallel (the step turned one box by about a right angle, which a
+/// step's rotation limit rules out) are measured as [`apart`].
+pub fn edge_edge(
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+    (a, b, sign): (u8, u8, f64),
+) -> Witness {
+    let (ca, da, _) = world_edge(half_a, pose_a, usize::from(a));
+    let (cb, db, _) = world_edge(half_b, pose_b, usize::from(b));
+    let cross = da.cross(&db);
+    let sine = cross.norm();
+    if sine < 1e-9 {
+        return apart(half_a, pose_a, half_b, pose_b);
+    }
+    let normal = cross * (sign / sine);
+    let (s, t) = line_params((&ca, &da), (&cb, &db));
+    let (point_a, point_b) = (ca + s * da, cb + t * db);
+    Witness {
+        phi: normal.dot(&(ca - cb)),
+        point_a,
+        point_b,
+        normal,
+    }
+}
+
+/// An empty slot's witness: the distance of the two boxes' centres plus both bounding radii,
+/// along the line of the centres (the witnesses are the bounding spheres' far points, so `δφ =
+/// n · (δx_a − δx_b)` holds there): farther than any point of either box from the other, so
+/// the slot is never near enough to take part in a step.
+pub fn apart(
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+) -> Witness {
+    let d = pose_a.pos - pose_b.pos;
+    let length = d.norm();
+    let normal = if length > 1e-100 {
+        d / length
+    } else {
+        pose_b.rot.column(2).into_owned()
+    };
+    let (ra, rb) = (half_a.norm(), half_b.norm());
+    Witness {
+        phi: length + ra + rb,
+        point_a: pose_a.pos + ra * normal,
+        point_b: pose_b.pos - rb * normal,
+        normal,
+    }
+}
+
+/// Slot `slot`'s witness at these poses, its crossing found anew ([`crossings`]; [`apart`]
+/// when the slot is empty).
+pub fn slot_witness(
+    slot: usize,
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+) -> Witness {
+    match crossings(half_a, pose_a, half_b, pose_b).slot(slot) {
+        Some(c) => edge_edge(half_a, pose_a, half_b, pose_b, (c.a, c.b, c.sign)),
+        None => apart(half_a, pose_a, half_b, pose_b),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Rotation3, Vector3};
+
+    fn pose(pos: [f64; 3], axis_angle: [f64; 3]) -> GeomPose {
+        GeomPose::new(
+            Vector3::from(pos),
+            *Rotation3::new(Vector3::from(axis_angle)).matrix(),
+        )
+    }
+
+    #[test]
+    fn edges_are_numbered_as_documented() {
+        let half = Vector3::new(1.0, 2.0, 3.0);
+        for e in 0..12 {
+            let (c, d, h) = box_edge(&half, e);
+            let k = d.iamax();
+            assert_eq!(h, half[k]);
+            let (si, sj) = (c[(k + 1) % 3].signum(), c[(k + 2) % 3].signum());
+            assert_eq!(edge_index(k, si, sj), e);
+        }
+    }
+
+    #[test]
+    fn crossed_edges_meet_at_one_point() {
+        // a ridge along x (a cube turned 45° about x) under a cube turned 45° about y, whose
+        // lowest edge runs along y: they cross above the origin
+        let half = Vector3::new(0.1, 0.1, 0.1);
+        let q = std::f64::consts::FRAC_PI_4;
+        let top = 0.1 * 2f64.sqrt();
+        let below = pose([0.0, 0.0, 0.0], [q, 0.0, 0.0]);
+        for gap in [0.01, 0.0, -0.003] {
+            let above = pose([0.02, -0.03, 2.0 * top + gap], [0.0, q, 0.0]);
+            let found = crossings(&half, &above, &half, &below);
+            let c = found.slot(0).expect("one crossing");
+            assert!(found.slot(1).is_none(), "{found:?}");
+            let w = edge_edge(&half, &above, &half, &below, (c.a, c.b, c.sign));
+            assert!((w.phi - gap).abs() < 1e-14, "{} vs {gap}", w.phi);
+            assert!((w.normal - Vector3::z()).norm() < 1e-14);
+            assert!((w.point_b - Vector3::new(0.02, 0.0, top)).norm() < 1e-14);
+            assert!((w.point_a - w.point_b - w.phi * w.normal).norm() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn a_cube_turned_on_a_cube_rests_on_eight_crossings() {
+        // equal cubes face on face, the upper turned 30° about z: its corners and the lower's
+        // all lie outside the other's face, and the contact polygon's eight vertices are
+        // crossings at the faces' height
+        let half = Vector3::new(0.1, 0.1, 0.1);
+        let below = pose([0.0, 0.0, 0.0], [0.0, 0.0, 0.0]);
+        let above = pose([0.0, 0.0, 0.2 + 1e-3], [0.0, 0.0, 0.5]);
+        let found = crossings(&half, &above, &half, &below);
+        let mut points = Vec::new();
+        for slot in 0..EDGE_SLOTS {
+            let c = found.slot(slot).expect("eight crossings");
+            let w = edge_edge(&half, &above, &half, &below, (c.a, c.b, c.sign));
+            assert!((w.phi - 1e-3).abs() < 1e-14 && (w.normal - Vector3::z()).norm() < 1e-12);
+            assert!((w.point_b.z - 0.1).abs() < 1e-14);
+            // on the boundary of both squares
+            let q = above.rot.transpose() * (w.point_a - above.pos);
+            assert!((q.x.abs().max(q.y.abs()) - 0.1).abs() < 1e-14, "{q:?}");
+            assert!((w.point_b.x.abs().max(w.point_b.y.abs()) - 0.1).abs() < 1e-14);
+            points.push(w.point_b);
+        }
+        // eight distinct points
+        for (k, p) in points.iter().enumerate() {
+            assert!(points[..k].iter().all(|q| (p - q).norm() > 1e-3));
+        }
+    }
+
+    #[test]
+    fn aligned_and_apart_boxes_have_no_crossing() {
+        let half = Vector3::new(0.1, 0.2, 0.05);
+        let below = pose([0.0, 0.0, 0.0], [0.0, 0.0, 0.0]);
+        // stacked flush and aligned: the edges meet at corners only
+        let flush = pose([0.0, 0.0, 0.1], [0.0, 0.0, 0.0]);
+        assert_eq!(
+            crossings(&half, &flush, &half, &below),
+            Crossings::default()
+        );
+        // a smaller box inside the face: its corners hold it
+        let small = Vector3::new(0.05, 0.05, 0.05);
+        let inside = pose([0.01, 0.02, 0.1], [0.0, 0.0, 0.7]);
+        assert_eq!(
+            crossings(&small, &inside, &half, &below),
+            Crossings::default()
+        );
+        // side by side at the same height, turned: nothing crosses along any common normal
+        let beside = pose([0.5, 0.0, 0.0], [0.0, 0.0, 0.4]);
+        assert!(crossings(&half, &beside, &half, &below).slot(0).is_none());
+    }
+
+    #[test]
+    fn apart_is_farther_than_any_point() {
+        let half = Vector3::new(0.1, 0.2, 0.3);
+        let (pa, pb) = (
+            pose([0.1, 0.0, 0.2], [0.3, 0.1, 0.0]),
+            pose([0.0; 3], [0.0; 3]),
+        );
+        let w = apart(&half, &pa, &half, &pb);
+        assert!(w.phi > 2.0 * half.norm());
+        assert!((w.point_a - w.point_b - w.phi * w.normal).norm() < 1e-14);
+    }
+}
