@@ -216,18 +216,7 @@ def test_a_fast_turn_is_taken_as_sub_steps_and_keeps_the_energy():
     assert np.any(turn > 0.3)
 
 
-def test_sub_steps_that_end_with_more_energy_than_the_whole_step_are_refused():
-    """Random scene 760, step 41: a ball-jointed link bouncing off the floor turns 0.33 rad. The
-    whole step converges from 17.95 J to 17.45 J; its two sub-steps found another root, at
-    21.96 J, each within the energy guard's allowance. A subdivision ending above both the
-    start and the whole step (plus the guard's allowance) is refused and the whole step kept."""
-    m, _ = random_scene(760)
-    tr = ukemi.rollout(m, m.make_state(), nsteps=41)
-    s = tr.final_state
-    nxt, info = ukemi.step(m, s)
-    whole, _ = ukemi.step(m.with_options(max_step_rotation=np.inf), s)
-    assert info.converged and info.subdivisions == 1
-    # the rotation limit asked for sub-steps
-    assert np.linalg.norm(whole.body_angvel, axis=1).max() * m.timestep > 0.3
-    np.testing.assert_array_equal(nxt.qpos, whole.qpos)
-    assert nxt.energy() < s.energy()
+# (Random scene 760's step 41, where two sub-steps found a root 4.5 J above the whole step and
+# were refused, is no longer reached since session 43: its links had passed through each other
+# edge on edge on the way there. The refusal is checked directly in engine/src/step.rs,
+# `a_subdivision_ending_above_the_energy_ceiling_is_refused`.)

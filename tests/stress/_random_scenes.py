@@ -130,14 +130,33 @@ def _mechanism(rng, b, rub=None) -> str:
     return f"{nlink}-link chain ({', '.join(kinds)})"
 
 
-def random_scene(seed: int, joint_friction: bool = False):
+def random_scene(seed: int, joint_friction: bool = False, excludes=()):
     """(model, description) of scene ``seed``: 40% loose bodies, 60% a jointed mechanism (with
-    ``joint_friction``, dry friction on about half of its joints)."""
+    ``joint_friction``, dry friction on about half of its joints); ``excludes``: pairs of body
+    names that do not collide."""
     rng = np.random.default_rng(seed)
     b = floor_builder(friction=float(rng.uniform(0.2, 1.0)))
     rub = np.random.default_rng([seed, 1]) if joint_friction else None
     desc = _loose_bodies(rng, b) if rng.random() < 0.4 else _mechanism(rng, b, rub)
+    for pair in excludes:
+        b.add_exclude(*pair)
     return b.compile(), desc
+
+
+def random_box_pile(seed: int):
+    """(model, description) of box pile ``seed``: 3-6 free boxes of random sizes, masses and
+    orientations dropped one above the other within a 0.3 m square, so that they land on each
+    other corner, edge or face first (the box pairs' corners and edge crossings)."""
+    rng = np.random.default_rng([seed, 3])
+    b = floor_builder(friction=float(rng.uniform(0.2, 1.0)))
+    nbody = int(rng.integers(3, 7))
+    for i in range(nbody):
+        size = _size(rng, "box", hi=0.12)
+        mass = float(np.exp(rng.uniform(np.log(0.2), np.log(5.0))))
+        pos = (float(rng.uniform(-0.15, 0.15)), float(rng.uniform(-0.15, 0.15)), 0.3 + 0.3 * i)
+        add_free(b, f"b{i}", "box", size, mass, inertia("box", size, mass), pos,
+                 tuple(_quat(rng)), friction=float(rng.uniform(0.2, 1.0)))
+    return b.compile(), f"pile of {nbody} boxes"
 
 
 def random_pile(seed: int):

@@ -10,8 +10,8 @@ import pytest
 
 import ukemi
 
-from ._measured import PILES, RANDOM_SCENES
-from ._random_scenes import random_pile, random_scene
+from ._measured import BOX_PILES, PILES, RANDOM_SCENES
+from ._random_scenes import random_box_pile, random_pile, random_scene
 from ._util import FULL, assert_stable, steps
 
 NSCENES = 1000 if FULL else 100
@@ -45,7 +45,7 @@ def pile(seed: int, nsteps: int = NSTEPS):
     return m, desc, ukemi.rollout(m, m.make_state(), nsteps=nsteps, on_failure="return")
 
 
-PILE_REASON = ("engine limit (README 'Known limits': box edge across a box edge, or a near-flat "
+PILE_REASON = ("engine limit (README 'Known limits': a near-flat "
                "cylinder rim held at one point for the step); measured over 300 steps: ")
 
 
@@ -57,6 +57,27 @@ def test_random_pile_with_cylinders(seed):
     every step converges, nothing sinks into anything (the cylinder pairs' rims, sides and
     segments included) and the energy never rises."""
     m, _, tr = pile(seed)
+    assert_stable(m, tr, energy_gain=1e-4)
+
+
+def box_pile(seed: int, nsteps: int = NSTEPS):
+    """Run box pile ``seed`` and return (model, description, trajectory)."""
+    m, desc = random_box_pile(seed)
+    return m, desc, ukemi.rollout(m, m.make_state(), nsteps=nsteps, on_failure="return")
+
+
+BOX_PILE_REASON = "engine limit (measured over 300 steps): "
+
+
+@pytest.mark.parametrize("seed", [
+    pytest.param(seed, marks=pytest.mark.xfail(strict=False, reason=BOX_PILE_REASON + BOX_PILES[seed]))
+    if seed in BOX_PILES else seed for seed in range(NSCENES // 4)])
+def test_random_box_pile(seed):
+    """3-6 boxes of random sizes and turns dropped onto each other, landing corner, edge or
+    face first: every step converges, nothing sinks into anything (corners and edge crossings)
+    and the energy never rises. Before session 43 (corners only) 62 of the first 100 piles
+    failed, boxes falling through each other edge first."""
+    m, _, tr = box_pile(seed)
     assert_stable(m, tr, energy_gain=1e-4)
 
 

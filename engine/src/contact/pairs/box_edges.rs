@@ -13,7 +13,7 @@
 //! `i`, B's axis `j`, not near parallel), the axis `n = ±(a_i × b_j)/|a_i × b_j|` oriented from
 //! B towards A (by the boxes' centres), and the edges that support each box along it: B's edge
 //! along `b_j` farthest along `n`, A's along `a_i` farthest along `−n` (both edges of a box where
-//! the face between them is level with `n` within [`TIE`], as where two faces meet flat). A
+//! the face between them is level with `n` within `TIE`, as where two faces meet flat). A
 //! supporting pair is a crossing when the two edge lines' closest points are interior to both
 //! edges; its signed distance is then `φ = n · (c_a − c_b)` (any points of the two lines: `n`
 //! is normal to both), and not deeper than either box's half thickness along `n` (deeper, the
@@ -51,7 +51,7 @@ pub fn box_edge(half: &Vector3<f64>, e: usize) -> (Vector3<f64>, Vector3<f64>, f
     let k = e / 4;
     let (i, j) = ((k + 1) % 3, (k + 2) % 3);
     let si = if e % 4 < 2 { 1.0 } else { -1.0 };
-    let sj = if e % 2 == 0 { 1.0 } else { -1.0 };
+    let sj = if e.is_multiple_of(2) { 1.0 } else { -1.0 };
     let mut centre = Vector3::zeros();
     centre[i] = si * half[i];
     centre[j] = sj * half[j];
@@ -138,6 +138,34 @@ fn supporting_signs(pose: &GeomPose, k: usize, u: &Vector3<f64>) -> [&'static [f
     [side((k + 1) % 3), side((k + 2) % 3)]
 }
 
+/// The largest separation of boxes A and B along their edge-crossing axes `a_i × b_j` (edges
+/// not near parallel): `|u · (c_a − c_b)|` less both half thicknesses along `u`; −∞ if all are
+/// parallel.
+pub fn cross_separation(
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+) -> f64 {
+    let centres = pose_a.pos - pose_b.pos;
+    let mut best = f64::NEG_INFINITY;
+    for i in 0..3 {
+        for j in 0..3 {
+            let cross = pose_a.rot.column(i).cross(&pose_b.rot.column(j));
+            let sine = cross.norm();
+            if sine < PARALLEL {
+                continue;
+            }
+            let u = cross / sine;
+            let separation = u.dot(&centres).abs()
+                - half_thickness(half_a, pose_a, &u)
+                - half_thickness(half_b, pose_b, &u);
+            best = best.max(separation);
+        }
+    }
+    best
+}
+
 /// The edge crossings of boxes A and B at these poses (see the module's documentation).
 pub fn crossings(
     half_a: &Vector3<f64>,
@@ -147,7 +175,13 @@ pub fn crossings(
 ) -> Crossings {
     let centres = pose_a.pos - pose_b.pos;
     // (at most 9 direction pairs × 4 supporting pairs)
-    let mut found: [Option<Crossing>; 36] = [None; 36];
+    let none = Crossing {
+        a: 0,
+        b: 0,
+        sign: 1.0,
+        phi: f64::INFINITY,
+    };
+    let mut found = [none; 36];
     let mut count = 0;
     for i in 0..3 {
         let da = pose_a.rot.column(i).into_owned();
@@ -181,12 +215,12 @@ pub fn crossings(
                                 s.abs() < ha * (1.0 - INTERIOR) && t.abs() < hb * (1.0 - INTERIOR);
                             let phi = n.dot(&(ca - cb));
                             if inside && phi > deepest {
-                                found[count] = Some(Crossing {
+                                found[count] = Crossing {
                                     a: ea as u8,
                                     b: eb as u8,
                                     sign,
                                     phi,
-                                });
+                                };
                                 count += 1;
                             }
                         }
@@ -197,14 +231,13 @@ pub fn crossings(
     }
     let found = &mut found[..count];
     // the deepest eight, then in the order of their edges
-    found.sort_by(|x, y| {
-        let (x, y) = (x.unwrap(), y.unwrap());
-        x.phi.total_cmp(&y.phi).then((x.a, x.b).cmp(&(y.a, y.b)))
-    });
+    found.sort_by(|x, y| x.phi.total_cmp(&y.phi).then((x.a, x.b).cmp(&(y.a, y.b))));
     let kept = &mut found[..count.min(EDGE_SLOTS)];
-    kept.sort_by_key(|c| c.map(|c| (c.a, c.b)));
+    kept.sort_by_key(|c| (c.a, c.b));
     let mut out = Crossings::default();
-    out.found[..kept.len()].copy_from_slice(kept);
+    for (slot, c) in out.found.iter_mut().zip(kept.iter()) {
+        *slot = Some(*c);
+    }
     out
 }
 
