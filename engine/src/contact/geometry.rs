@@ -474,6 +474,14 @@ pub fn evaluate(
     }
 }
 
+impl Feature {
+    /// Whether this is one of a box pair's edge-crossing slots ([`Feature::BoxEdge`]): most
+    /// hold nothing at any step, and they are not pairs of the problem's degree.
+    pub fn is_crossing_slot(&self) -> bool {
+        matches!(self, Feature::BoxEdge { .. })
+    }
+}
+
 /// The rim point (in the cylinder's geom frame) nearest the other geom of a cylinder-rim
 /// candidate (a [`Core::Rim`], or a [`Core::Side`] whose nearest axis point is an end), and the
 /// sine of the angle between that disk and the contact plane (0: the disk lies flat on the

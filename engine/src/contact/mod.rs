@@ -561,8 +561,10 @@ fn box_face_at(
             // normal, and the face of least overlap is not where they meet (random box pile
             // 18: a corner resting on a box's bottom face, 1.3 cm from its side, was measured
             // against the side's plane, 1.3 cm deep)
-            let edge_on_edge =
-                box_edges::cross_separation(ha, &pa, hb, &pb) > separation + EDGE_ON_EDGE_TOL;
+            // (apart along a face normal, a face plane bounds each corner's distance from below
+            // anyway: the check is for boxes that touch)
+            let edge_on_edge = separation <= 0.0
+                && box_edges::cross_separation(ha, &pa, hb, &pb) > separation + EDGE_ON_EDGE_TOL;
             let axis = (pa, pb, (!edge_on_edge).then_some(normal));
             memo.last = Some((key, axis));
             axis

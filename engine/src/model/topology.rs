@@ -174,7 +174,7 @@ impl Topology {
             // (a box pair's edge-crossing slots are not counted: most hold nothing, and the
             // degree sets the interior-point centring of every step, so adding them would have
             // moved every box model's steps)
-            if !matches!(c.feature, crate::contact::geometry::Feature::BoxEdge { .. }) {
+            if !c.feature.is_crossing_slot() {
                 let (o, q) = c.model.cones();
                 cone_degree += o + q;
             }

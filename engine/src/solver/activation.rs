@@ -341,12 +341,19 @@ fn prepare_candidate_at(
     skip_empty: bool,
 ) {
     let contact = &model.contacts[c];
+    // (only an edge slot reads the margin: computed for every candidate it was 3% of a Panda
+    // step)
+    let margin = if contact.feature.is_crossing_slot() {
+        candidate_margin(model, contact)
+    } else {
+        f64::INFINITY
+    };
     ws.frozen[c] = crate::contact::freeze_for_step_at(
         contact,
         &model.geoms,
         (&a.now, &b.now),
         (&a.ahead, &b.ahead),
-        candidate_margin(model, contact),
+        margin,
         memo,
     );
     let w =
@@ -826,11 +833,9 @@ pub(crate) fn missed_contacts(model: &Model, ws: &mut Workspace) -> usize {
         }
         // (an empty edge slot, or one left out of the step's preparation, holds no crossing:
         // a crossing the step brought in is found by `refreeze_crossings`, pair by pair)
-        let slot = matches!(
-            contact.feature,
-            crate::contact::geometry::Feature::BoxEdge { .. }
-        );
-        if slot && matches!(ws.frozen[c], None | Some(Frozen::NoCrossing)) {
+        if contact.feature.is_crossing_slot()
+            && matches!(ws.frozen[c], None | Some(Frozen::NoCrossing))
+        {
             continue;
         }
         let floor = 0.25 * candidate_margin(model, contact);
@@ -897,7 +902,10 @@ const CROSSING_REFREEZE_TOL: f64 = 1e-10;
 pub(crate) fn refreeze_crossings(model: &Model, state: &State, ws: &mut Workspace) -> usize {
     use crate::contact::geometry::{Feature, box_edges};
     let mut n = 0;
-    let mut c = 0;
+    // (the slots come after every other candidate: `ModelBuilder`'s order)
+    let mut c = model
+        .contacts
+        .partition_point(|k| !k.feature.is_crossing_slot());
     let mut memo = crate::contact::BoxPairMemo::default();
     while c < model.ncontact() {
         let contact = &model.contacts[c];

@@ -980,13 +980,7 @@ impl FarPairs {
     pub fn left_out(model: &Model, active: &[bool], product: f64) -> FarPairs {
         // (a box pair's edge-crossing slots are not pairs of the problem's degree either,
         // [`crate::model::topology::Topology::cone_degree`])
-        let slot = |c: usize| {
-            c < model.ncontact()
-                && matches!(
-                    model.contacts[c].feature,
-                    crate::contact::geometry::Feature::BoxEdge { .. }
-                )
-        };
+        let slot = |c: usize| c < model.ncontact() && model.contacts[c].feature.is_crossing_slot();
         let every: Vec<bool> = (0..active.len()).map(|c| !slot(c)).collect();
         let taking: Vec<bool> = (0..active.len()).map(|c| active[c] && !slot(c)).collect();
         let mut count = 0usize;

@@ -311,6 +311,46 @@ pub fn slot_witness(
     }
 }
 
+/// Whether two boxes that can only slide along the world axis `s` relative to each other (a
+/// parallel gripper's finger pads, [`crate::contact::slide_pair`]), at these poses of one
+/// configuration, can never cross edges: their faces are aligned (each axis of one parallel
+/// or perpendicular to each of the other's), every crossing direction is a face normal either
+/// along `s` (the two faces' outlines across `s` never move relative to each other: none of
+/// their edges cross where the boxes touch along `s`) or across it (their separation along it
+/// never changes, and a crossing there would need the boxes to pass into each other). `false`
+/// when that cannot be shown: the pair keeps its slots.
+pub fn slide_pair_never_crosses(
+    half_a: &Vector3<f64>,
+    pose_a: &GeomPose,
+    half_b: &Vector3<f64>,
+    pose_b: &GeomPose,
+    s: &Vector3<f64>,
+) -> bool {
+    let tol = 1e-9;
+    let axes_a: [Vector3<f64>; 3] = std::array::from_fn(|k| pose_a.rot.column(k).into_owned());
+    let axes_b: [Vector3<f64>; 3] = std::array::from_fn(|k| pose_b.rot.column(k).into_owned());
+    let aligned = (axes_a.iter()).all(|a| {
+        axes_b
+            .iter()
+            .all(|b| a.dot(b).abs() < tol || a.dot(b).abs() > 1.0 - tol)
+    });
+    let along = |u: &Vector3<f64>| u.dot(s).abs() > 1.0 - tol;
+    let across = |u: &Vector3<f64>| u.dot(s).abs() < tol;
+    if !aligned || !axes_a.iter().all(|a| along(a) || across(a)) {
+        return false;
+    }
+    // the boxes moved along `s` until they touch across it, on either side
+    let d = pose_a.pos - pose_b.pos;
+    let reach = half_thickness(half_a, pose_a, s) + half_thickness(half_b, pose_b, s);
+    [reach, -reach].into_iter().all(|side| {
+        let mut touching = *pose_a;
+        touching.pos += (side - d.dot(s)) * s;
+        crossings(half_a, &touching, half_b, pose_b)
+            .slot(0)
+            .is_none()
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -403,6 +443,26 @@ mod tests {
         // side by side at the same height, turned: nothing crosses along any common normal
         let beside = pose([0.5, 0.0, 0.0], [0.0, 0.0, 0.4]);
         assert!(crossings(&half, &beside, &half, &below).slot(0).is_none());
+    }
+
+    #[test]
+    fn aligned_finger_pads_never_cross_unless_their_outlines_do() {
+        // pads facing each other across the slide axis y, sliding along it
+        let y = Vector3::y();
+        let (big, small) = (
+            Vector3::new(0.0085, 0.004, 0.0085),
+            Vector3::new(0.003, 0.002, 0.003),
+        );
+        let left = pose([0.0, 0.02, 0.0445], [0.0, 0.0, 0.0]);
+        let right = pose([0.0055, -0.02, 0.05], [0.0, 0.0, std::f64::consts::PI]);
+        // a small pad's outline inside the big one's: its corners hold it, no crossing ever
+        assert!(slide_pair_never_crosses(&small, &right, &big, &left, &y));
+        // outlines that cross (the small pad astride the big one's top edge): they may
+        let astride = pose([0.0055, -0.02, 0.053], [0.0, 0.0, std::f64::consts::PI]);
+        assert!(!slide_pair_never_crosses(&small, &astride, &big, &left, &y));
+        // turned pads: not shown
+        let turned = pose([0.0, -0.02, 0.0445], [0.0, 0.3, 0.0]);
+        assert!(!slide_pair_never_crosses(&big, &turned, &big, &left, &y));
     }
 
     #[test]
