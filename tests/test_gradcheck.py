@@ -1,6 +1,7 @@
 """torch.autograd.gradcheck and jax check_grads on ukemi.torch / ukemi.jax steps and rollouts
 for a pendulum, a cartpole, a box sliding on the floor, gymnasium's hopper standing on the
-floor and a cube resting on a box on its edge crossings, with respect to state, controls and parameters (the contact scenes in a fixed active set,
+floor, a cube resting on a box on its edge crossings and a capsule bridging two boxes on the
+crossings of its segment with their edges, with respect to state, controls and parameters (the contact scenes in a fixed active set,
 where the hard step is smooth, so the exact gradient, kappa_grad=None, must match finite
 differences)."""
 
@@ -84,8 +85,26 @@ def turned_cube():
     return m, np.concatenate([s.qpos, s.qvel])
 
 
+def capsule_bridge():
+    """A capsule lying across two boxes with a gap between them, held only where its segment
+    crosses their top edges (box_edges.rs, capsule crossings)."""
+    b = ukemi.ModelBuilder(timestep=0.01)
+    for k, y in enumerate((0.2, -0.2)):
+        b.add_geom(f"block{k}", body="world", shape="box", size=(0.1, 0.1, 0.1), pos=(0, y, 0.1))
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    b.add_body("bar", mass=1.0, inertia=(0.04, 0.04, 2e-4), pos=(0.02, 0, 0.2205), quat=(c, s, 0, 0))
+    b.add_joint("free", kind="floating", parent="world", child="bar")
+    b.add_geom("bar", body="bar", shape="capsule", size=(0.02, 0.35), friction=0.5)
+    b.add_actuator("push", joint="free", gear=1.0)
+    m = tight(b.compile())
+    s = m.make_state()
+    for _ in range(30):
+        s, _ = ukemi.step(m, s, [0.0])
+    return m, np.concatenate([s.qpos, s.qvel])
+
+
 SCENES = {"pendulum": pendulum, "cartpole": cartpole, "sliding_box": sliding_box, "hopper": hopper,
-          "turned_cube": turned_cube}
+          "turned_cube": turned_cube, "capsule_bridge": capsule_bridge}
 
 
 @pytest.mark.parametrize("name", list(SCENES))

@@ -36,7 +36,7 @@
 //! | sphere – capsule | 1: closest point on the segment |
 //! | capsule – capsule | 3: segment–segment closest points, each end of A against B's segment |
 //! | sphere / point – box | 1: signed distance of the centre to the box, minus the radius |
-//! | capsule – box | 3: end spheres and the midpoint sphere against the box |
+//! | capsule – box | 5: end spheres and the midpoint sphere against the box, and two slots for where the segment crosses the box's edges (`pairs/box_edges.rs`) |
 //! | box – box | 24: each corner of A against B, each corner of B against A, and eight slots for the points where an edge of A crosses an edge of B (`pairs/box_edges.rs`) |
 //! | mesh – plane | one per hull vertex |
 //! | sphere / point – mesh | 1: signed distance of the centre to the hull, minus the radius |
@@ -66,9 +66,9 @@
 //! ## Limitations
 //! Ellipsoids only collide with planes; plane–plane is unsupported. A box's or hull's edge
 //! across a cylinder's rim is not detected; deep inside a solid (a rim or segment crossing it)
-//! the nearest point ties two faces and the witness normal is one face's. Capsule–box and
-//! capsule–mesh only test three spheres on the segment, so a capsule crossing a box edge
-//! between them (e.g. a long capsule lying across a box) is not detected. Box–mesh and
+//! the nearest point ties two faces and the witness normal is one face's. Capsule–mesh only
+//! tests three spheres on the segment, so a capsule crossing a hull's edge between them is not
+//! detected (capsule–box has its edge crossings). Box–mesh and
 //! mesh–mesh only test vertices, so edge–edge contact there (a box turned on a mesh cube) is
 //! not detected (box–box has its edge crossings). Capsule–capsule tests the ends of A only,
 //! so parallel capsules are supported at two points only where A's ends lie alongside B's
@@ -371,6 +371,16 @@ pub enum Feature {
         /// The core of B.
         b: Core,
     },
+    /// One of a capsule–box pair's [`box_edges::CAPSULE_SLOTS`] crossings: capsule A's
+    /// segment across an edge of box B ([`box_edges::capsule_crossings`]).
+    CapsuleEdge {
+        /// Which of the pair's crossings (ordered by their edges).
+        slot: u8,
+        /// The capsule core of A.
+        a: Segment,
+        /// Half extents of box B.
+        half_extents_b: Vector3<f64>,
+    },
     /// One of a box pair's [`box_edges::EDGE_SLOTS`] edge crossings: an edge of box A across
     /// an edge of box B ([`box_edges`]).
     BoxEdge {
@@ -460,6 +470,17 @@ pub fn evaluate(
         }
         Feature::CoreSolid { a, b } => convex::core_solid(a, pose_a, b, pose_b),
         Feature::SolidCore { a, b } => convex::core_solid(b, pose_b, a, pose_a).swapped(),
+        Feature::CapsuleEdge {
+            slot,
+            a,
+            half_extents_b,
+        } => box_edges::capsule_slot_witness(
+            usize::from(*slot),
+            (a.half_length, a.radius),
+            pose_a,
+            half_extents_b,
+            pose_b,
+        ),
         Feature::BoxEdge {
             slot,
             half_extents_a,
@@ -475,10 +496,10 @@ pub fn evaluate(
 }
 
 impl Feature {
-    /// Whether this is one of a box pair's edge-crossing slots ([`Feature::BoxEdge`]): most
-    /// hold nothing at any step, and they are not pairs of the problem's degree.
+    /// Whether this is an edge-crossing slot ([`Feature::BoxEdge`], [`Feature::CapsuleEdge`]):
+    /// most hold nothing at any step, and they are not pairs of the problem's degree.
     pub fn is_crossing_slot(&self) -> bool {
-        matches!(self, Feature::BoxEdge { .. })
+        matches!(self, Feature::BoxEdge { .. } | Feature::CapsuleEdge { .. })
     }
 }
 
@@ -798,17 +819,20 @@ fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
             let rest = ends.map(|end| Feature::SphereCapsule { a: end, b });
             Some([first].into_iter().chain(rest).collect())
         }
+        // the end spheres and the midpoint sphere, then the segment's crossings of the box's
+        // edges
         Shape::Box { half_extents } => {
             let middle = ball(Vector3::zeros(), a.radius);
-            let balls = [ends[0], middle, ends[1]];
-            Some(
-                balls
-                    .map(|a| Feature::SphereBox {
-                        a,
-                        half_extents_b: half_extents,
-                    })
-                    .to_vec(),
-            )
+            let balls = [ends[0], middle, ends[1]].map(|ball| Feature::SphereBox {
+                a: ball,
+                half_extents_b: half_extents,
+            });
+            let crossings = (0..box_edges::CAPSULE_SLOTS as u8).map(|slot| Feature::CapsuleEdge {
+                slot,
+                a,
+                half_extents_b: half_extents,
+            });
+            Some(balls.into_iter().chain(crossings).collect())
         }
         // the segment's point nearest the cylinder, then the end spheres
         Shape::Cylinder { .. } => {

@@ -178,6 +178,7 @@ impl Contact {
             Feature::CoreSolid { a, .. } => (a.radius(), 0.0),
             Feature::SolidCore { b, .. } => (0.0, b.radius()),
             Feature::BoxEdge { .. } => (0.0, 0.0),
+            Feature::CapsuleEdge { a, .. } => (a.radius, 0.0),
         }
     }
 }
@@ -379,6 +380,18 @@ pub fn witness_frozen_at(
                 ..
             },
         ) => box_edges::apart(half_extents_a, wa, half_extents_b, wb),
+        (
+            Some(Frozen::Crossing { b, sign, .. }),
+            Feature::CapsuleEdge {
+                a, half_extents_b, ..
+            },
+        ) => box_edges::capsule_edge((a.half_length, a.radius), wa, half_extents_b, wb, (b, sign)),
+        (
+            Some(Frozen::NoCrossing),
+            Feature::CapsuleEdge {
+                a, half_extents_b, ..
+            },
+        ) => box_edges::capsule_apart((a.half_length, a.radius), wa, half_extents_b, wb),
         _ => geometry::evaluate(&c.feature, &ga.shape, wa, &gb.shape, wb),
     }
 }
@@ -397,7 +410,7 @@ pub fn freeze_for_step(
         c.feature,
         Feature::DiskPlane { .. } | Feature::CoreSolid { .. } | Feature::SolidCore { .. }
     );
-    if !disk && !box_pair(c, geoms) {
+    if !disk && !box_pair(c, geoms) && !c.feature.is_crossing_slot() {
         return None;
     }
     let [na, nb, pa, pb] = pair_world_poses(c, geoms, now, predicted);
@@ -610,29 +623,56 @@ fn box_crossing_at(
     margin: f64,
     memo: &mut BoxPairMemo,
 ) -> Option<Frozen> {
-    let Feature::BoxEdge {
-        slot,
-        half_extents_a: ha,
-        half_extents_b: hb,
-    } = &c.feature
-    else {
-        return None;
+    let slot = match &c.feature {
+        Feature::BoxEdge { slot, .. } | Feature::CapsuleEdge { slot, .. } => *slot,
+        _ => return None,
     };
     let key = (c.geom_a, c.geom_b);
     let found = match memo.crossings {
         Some((k, found)) if k == key => found,
         _ => {
-            let apart = |(a, b): (&GeomPose, &GeomPose)| geometry::box_box_axis(ha, a, hb, b).0;
+            let apart = |poses| crossing_pair_gap(&c.feature, poses);
             let found = if apart((na, nb)) > margin && apart((pa, pb)) > margin {
                 Crossings::default()
             } else {
-                box_edges::crossings(ha, na, hb, nb)
+                crossings_at(&c.feature, (na, nb))
             };
             memo.crossings = Some((key, found));
             found
         }
     };
-    Some(crossing_frozen(found.slot(usize::from(*slot))))
+    Some(crossing_frozen(found.slot(usize::from(slot))))
+}
+
+/// The crossings of an edge slot's pair at these geom poses (none for other candidates).
+pub fn crossings_at(feature: &Feature, (wa, wb): (&GeomPose, &GeomPose)) -> Crossings {
+    match feature {
+        Feature::BoxEdge {
+            half_extents_a: ha,
+            half_extents_b: hb,
+            ..
+        } => box_edges::crossings(ha, wa, hb, wb),
+        Feature::CapsuleEdge {
+            a, half_extents_b, ..
+        } => box_edges::capsule_crossings((a.half_length, a.radius), wa, half_extents_b, wb),
+        _ => Crossings::default(),
+    }
+}
+
+/// A lower bound on the distance of an edge slot's two geoms at these geom poses: a box
+/// pair's separation along the face normals; a capsule's and a box's bounding spheres' gap.
+pub fn crossing_pair_gap(feature: &Feature, (wa, wb): (&GeomPose, &GeomPose)) -> f64 {
+    match feature {
+        Feature::BoxEdge {
+            half_extents_a: ha,
+            half_extents_b: hb,
+            ..
+        } => geometry::box_box_axis(ha, wa, hb, wb).0,
+        Feature::CapsuleEdge {
+            a, half_extents_b, ..
+        } => (wa.pos - wb.pos).norm() - a.half_length - a.radius - half_extents_b.norm(),
+        _ => f64::NEG_INFINITY,
+    }
 }
 
 /// The frozen feature of an edge slot holding `crossing`.

@@ -900,7 +900,7 @@ const CROSSING_REFREEZE_TOL: f64 = 1e-10;
 /// are found at the step's predicted poses ([`crate::contact::freeze_for_step`]); a box
 /// knocked over by the step crosses edges the prediction did not.
 pub(crate) fn refreeze_crossings(model: &Model, state: &State, ws: &mut Workspace) -> usize {
-    use crate::contact::geometry::{Feature, box_edges};
+    use crate::contact::geometry::box_edges;
     let mut n = 0;
     // (the slots come after every other candidate: `ModelBuilder`'s order)
     let mut c = model
@@ -909,22 +909,13 @@ pub(crate) fn refreeze_crossings(model: &Model, state: &State, ws: &mut Workspac
     let mut memo = crate::contact::BoxPairMemo::default();
     while c < model.ncontact() {
         let contact = &model.contacts[c];
-        let Feature::BoxEdge {
-            half_extents_a: ha,
-            half_extents_b: hb,
-            ..
-        } = &contact.feature
-        else {
-            c += 1;
-            continue;
-        };
         let same_pair = |k: &usize| {
             let other = &model.contacts[*k];
             (other.geom_a, other.geom_b) == (contact.geom_a, contact.geom_b)
-                && matches!(other.feature, Feature::BoxEdge { .. })
+                && other.feature.is_crossing_slot()
         };
         let slots: Vec<usize> = (c..model.ncontact()).take_while(|k| same_pair(k)).collect();
-        c += slots.len();
+        c += slots.len().max(1);
         let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
         // (bounding spheres at the new poses, from `missed_contacts`: apart, nothing crosses)
         if ws.geom_bounds[contact.geom_a].gap(&ws.geom_bounds[contact.geom_b]) > 0.0 {
@@ -932,10 +923,10 @@ pub(crate) fn refreeze_crossings(model: &Model, state: &State, ws: &mut Workspac
         }
         let pa = ga.world_pose(&next_pose(&ws.next_pose, ga.body));
         let pb = gb.world_pose(&next_pose(&ws.next_pose, gb.body));
-        if crate::contact::geometry::box_box_axis(ha, &pa, hb, &pb).0 > 0.0 {
-            continue; // apart along a face normal: nothing crosses
+        if crate::contact::crossing_pair_gap(&contact.feature, (&pa, &pb)) > 0.0 {
+            continue; // apart: nothing crosses
         }
-        let found = box_edges::crossings(ha, &pa, hb, &pb);
+        let found = crate::contact::crossings_at(&contact.feature, (&pa, &pb));
         for x in (0..box_edges::EDGE_SLOTS).filter_map(|k| found.slot(k)) {
             let held = |k: &usize| matches!(ws.frozen[*k], Some(Frozen::Crossing { a, b, .. }) if (a, b) == (x.a, x.b));
             if x.phi >= -CROSSING_REFREEZE_TOL || slots.iter().any(held) {
