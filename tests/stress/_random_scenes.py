@@ -159,6 +159,25 @@ def random_box_pile(seed: int):
     return b.compile(), f"pile of {nbody} boxes"
 
 
+def random_hull_pile(seed: int):
+    """(model, description) of hull pile ``seed``: 3-5 free meshes (the convex hulls of 6-10
+    random points, a few centimetres across) dropped one above the other, so that they land on
+    each other vertex, edge or face first (the hull pairs' vertices and edge crossings)."""
+    rng = np.random.default_rng([seed, 4])
+    b = floor_builder(friction=float(rng.uniform(0.2, 1.0)))
+    nbody = int(rng.integers(3, 6))
+    for i in range(nbody):
+        points = rng.normal(size=(int(rng.integers(6, 11)), 3)) * rng.uniform(0.03, 0.08, 3)
+        reach = float(np.abs(points).max())
+        b.add_body(f"b{i}", 1.0, (0.4 * reach * reach,) * 3,
+                   pos=(float(rng.uniform(-0.1, 0.1)), float(rng.uniform(-0.1, 0.1)),
+                        0.3 + 0.4 * i), quat=tuple(_quat(rng)))
+        b.add_joint(f"b{i}_free", "free", "world", f"b{i}")
+        b.add_geom(f"b{i}", f"b{i}", "mesh", vertices=points.tolist(),
+                   friction=float(rng.uniform(0.2, 1.0)))
+    return b.compile(), f"pile of {nbody} hulls"
+
+
 def random_pile(seed: int):
     """(model, description) of pile ``seed``: 3-6 free bodies of random shapes (cylinders drawn
     twice as often), sizes, masses and orientations dropped one above the other within a

@@ -41,8 +41,8 @@
 //! | mesh – plane | one per hull vertex |
 //! | sphere / point – mesh | 1: signed distance of the centre to the hull, minus the radius |
 //! | capsule – mesh | 3: end spheres and the midpoint sphere against the hull |
-//! | box – mesh | each corner of the box against the hull, each hull vertex against the box |
-//! | mesh – mesh | each hull vertex of A against B's hull, and of B against A's |
+//! | box – mesh | each corner of the box against the hull, each hull vertex against the box, and eight slots for edge crossings (`pairs/box_edges.rs`) |
+//! | mesh – mesh | each hull vertex of A against B's hull, and of B against A's, and eight slots for edge crossings (hulls of up to 255 edges, 4096 edge pairs) |
 //! | sphere / point – cylinder | 1: signed distance of the centre to the cylinder, minus the radius |
 //! | capsule – cylinder | 3: the segment's point nearest the cylinder, and the end spheres |
 //! | box – cylinder | A's corners and A's twelve edges' nearest points against the cylinder; per end disk, the rim's point nearest A and three fixed rim points against A |
@@ -68,9 +68,9 @@
 //! across a cylinder's rim is not detected; deep inside a solid (a rim or segment crossing it)
 //! the nearest point ties two faces and the witness normal is one face's. Capsule–mesh only
 //! tests three spheres on the segment, so a capsule crossing a hull's edge between them is not
-//! detected (capsule–box has its edge crossings). Box–mesh and
-//! mesh–mesh only test vertices, so edge–edge contact there (a box turned on a mesh cube) is
-//! not detected (box–box has its edge crossings). Capsule–capsule tests the ends of A only,
+//! detected (capsule–box has its edge crossings). Box–mesh and mesh–mesh pairs of hulls with
+//! more than 255 edges or 4096 edge pairs only test vertices, so edge–edge contact between
+//! detailed meshes is not detected. Capsule–capsule tests the ends of A only,
 //! so parallel capsules are supported at two points only where A's ends lie alongside B's
 //! segment.
 //!
@@ -371,6 +371,16 @@ pub enum Feature {
         /// The core of B.
         b: Core,
     },
+    /// One of the [`box_edges::EDGE_SLOTS`] edge crossings of a box and a mesh's hull, or of
+    /// two hulls: an edge of A across an edge of B ([`box_edges::polytope_crossings`]).
+    EdgeCrossing {
+        /// Which of the pair's crossings (ordered by their edges).
+        slot: u8,
+        /// The box or hull of A.
+        a: Solid,
+        /// The box or hull of B.
+        b: Solid,
+    },
     /// One of a capsule–box pair's [`box_edges::CAPSULE_SLOTS`] crossings: capsule A's
     /// segment across an edge of box B ([`box_edges::capsule_crossings`]).
     CapsuleEdge {
@@ -470,6 +480,13 @@ pub fn evaluate(
         }
         Feature::CoreSolid { a, b } => convex::core_solid(a, pose_a, b, pose_b),
         Feature::SolidCore { a, b } => convex::core_solid(b, pose_b, a, pose_a).swapped(),
+        Feature::EdgeCrossing { slot, a, b } => match (polytope(a), polytope(b)) {
+            (Some(pa), Some(pb)) => {
+                box_edges::polytope_slot_witness(usize::from(*slot), pa, pose_a, pb, pose_b)
+            }
+            // (slots are made for boxes and hulls only)
+            _ => box_edges::centres_apart(pose_a, pose_b),
+        },
         Feature::CapsuleEdge {
             slot,
             a,
@@ -499,7 +516,19 @@ impl Feature {
     /// Whether this is an edge-crossing slot ([`Feature::BoxEdge`], [`Feature::CapsuleEdge`]):
     /// most hold nothing at any step, and they are not pairs of the problem's degree.
     pub fn is_crossing_slot(&self) -> bool {
-        matches!(self, Feature::BoxEdge { .. } | Feature::CapsuleEdge { .. })
+        matches!(
+            self,
+            Feature::BoxEdge { .. } | Feature::CapsuleEdge { .. } | Feature::EdgeCrossing { .. }
+        )
+    }
+}
+
+/// The box or hull of a solid as the crossing search sees it (`None` for a cylinder).
+pub fn polytope(solid: &Solid) -> Option<box_edges::Polytope<'_>> {
+    match solid {
+        Solid::Box { half_extents } => Some(box_edges::Polytope::Box(half_extents)),
+        Solid::Hull(hull) => Some(box_edges::Polytope::Hull(hull)),
+        Solid::Cylinder { .. } => None,
     }
 }
 
@@ -864,7 +893,8 @@ fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
     }
 }
 
-/// Box A against mesh B: the corners of A against B's hull, then the hull's vertices against A.
+/// Box A against mesh B: the corners of A against B's hull, the hull's vertices against A,
+/// then the slots of the edge crossings ([`crossing_slots`]).
 fn box_hull(half_a: &Vector3<f64>, hull_b: &Arc<ConvexHull>) -> Vec<Feature> {
     let a_in_b = box_corners(half_a).map(|c| Feature::SphereHull {
         a: ball(c, 0.0),
@@ -874,11 +904,16 @@ fn box_hull(half_a: &Vector3<f64>, hull_b: &Arc<ConvexHull>) -> Vec<Feature> {
         half_extents_a: *half_a,
         b: ball(v, 0.0),
     });
-    a_in_b.into_iter().chain(b_in_a).collect()
+    let a = Solid::Box {
+        half_extents: *half_a,
+    };
+    (a_in_b.into_iter().chain(b_in_a))
+        .chain(crossing_slots(&a, &Solid::Hull(hull_b.clone())))
+        .collect()
 }
 
-/// Mesh A against mesh B: the vertices of each hull against the other (as boxes' corners; an
-/// edge crossing an edge is not detected).
+/// Mesh A against mesh B: the vertices of each hull against the other (as boxes' corners),
+/// then the slots of the edge crossings ([`crossing_slots`]).
 fn hull_hull(hull_a: &Arc<ConvexHull>, hull_b: &Arc<ConvexHull>) -> Vec<Feature> {
     let a_in_b = hull_a.vertices.iter().map(|&v| Feature::SphereHull {
         a: ball(v, 0.0),
@@ -888,7 +923,26 @@ fn hull_hull(hull_a: &Arc<ConvexHull>, hull_b: &Arc<ConvexHull>) -> Vec<Feature>
         hull_a: hull_a.clone(),
         b: ball(v, 0.0),
     });
-    a_in_b.chain(b_in_a).collect()
+    let (a, b) = (Solid::Hull(hull_a.clone()), Solid::Hull(hull_b.clone()));
+    a_in_b.chain(b_in_a).chain(crossing_slots(&a, &b)).collect()
+}
+
+/// The edge-crossing slots of a box or hull A against a box or hull B: none when their edges
+/// make more than [`box_edges::MAX_EDGE_PAIRS`] pairs or one has more than 255 edges
+/// (detailed meshes meet at vertices only).
+fn crossing_slots(a: &Solid, b: &Solid) -> Vec<Feature> {
+    let count = |s: &Solid| polytope(s).map_or(0, |p| p.edge_count());
+    let (na, nb) = (count(a), count(b));
+    if na * nb > box_edges::MAX_EDGE_PAIRS || na.max(nb) > 255 || na * nb == 0 {
+        return Vec::new();
+    }
+    (0..box_edges::EDGE_SLOTS as u8)
+        .map(|slot| Feature::EdgeCrossing {
+            slot,
+            a: a.clone(),
+            b: b.clone(),
+        })
+        .collect()
 }
 
 /// Box against box: the corners of A against B, the corners of B against A, then the slots of

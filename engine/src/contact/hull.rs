@@ -22,6 +22,24 @@ pub struct ConvexHull {
     /// The largest distance of a vertex from the origin (kept: the activation asks for it per
     /// candidate, and a mesh has one candidate per vertex).
     radius: f64,
+    /// The hull's edges with their two faces' normals ([`Self::edges`]' order), for the edge
+    /// crossings of [`super::geometry::box_edges`].
+    edge_faces: Vec<HullEdge>,
+    /// The mean of the vertices: a point inside the hull.
+    interior: Vector3<f64>,
+}
+
+/// An edge of a hull (its geom frame) with the outward normals of its two faces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HullEdge {
+    /// Midpoint.
+    pub centre: Vector3<f64>,
+    /// Unit direction.
+    pub direction: Vector3<f64>,
+    /// Half the length (m).
+    pub half_length: f64,
+    /// Outward unit normals of the two faces that meet at the edge.
+    pub faces: [Vector3<f64>; 2],
 }
 
 impl ConvexHull {
@@ -99,6 +117,8 @@ impl ConvexHull {
             normals: Vec::new(),
             offsets: Vec::new(),
             radius: 0.0,
+            edge_faces: Vec::new(),
+            interior: Vector3::zeros(),
         };
         out.refresh_planes();
         // (every face a sliver, or no volume: no inside test and no mass would hold)
@@ -133,6 +153,21 @@ impl ConvexHull {
             self.normals.push(n);
             self.offsets.push(if sliver { f64::NAN } else { n.dot(&a) });
         }
+        self.interior = self.vertices.iter().sum::<Vector3<f64>>() / self.vertices.len() as f64;
+        let sliver = |f: usize| self.offsets[f].is_nan();
+        self.edge_faces = (self.sides().into_iter())
+            .filter(|&(_, f, g)| !sliver(f) && !g.is_some_and(sliver))
+            .map(|((i, j), f, g)| {
+                let (a, b) = (self.vertices[i], self.vertices[j]);
+                let half_length = 0.5 * (b - a).norm();
+                HullEdge {
+                    centre: 0.5 * (a + b),
+                    direction: (b - a) / (2.0 * half_length).max(1e-300),
+                    half_length,
+                    faces: [self.normals[f], self.normals[g.unwrap_or(f)]],
+                }
+            })
+            .collect();
     }
 
     /// The hull in a new frame: `x' = rot (x - origin)` for every vertex.
@@ -158,6 +193,12 @@ impl ConvexHull {
     /// triangles between two different planes (a diagonal between coplanar triangles of one
     /// face is not an edge).
     pub fn edges(&self) -> Vec<(usize, usize)> {
+        self.sides().into_iter().map(|(e, _, _)| e).collect()
+    }
+
+    /// The hull's edges with their triangles: `((i, j), f, g)`, [`Self::edges`]' order (`g`
+    /// `None` for a side with one triangle).
+    fn sides(&self) -> Vec<((usize, usize), usize, Option<usize>)> {
         let mut sides: Vec<((usize, usize), usize)> = Vec::new();
         for (f, t) in self.triangles.iter().enumerate() {
             for k in 0..3 {
@@ -170,19 +211,37 @@ impl ConvexHull {
             (self.normals[f] - self.normals[g]).amax() < 1e-9
                 && (self.offsets[f] - self.offsets[g]).abs() < 1e-9
         };
-        let mut edges: Vec<(usize, usize)> = Vec::new();
+        let mut edges: Vec<((usize, usize), usize, Option<usize>)> = Vec::new();
         for pair in sides.chunks(2) {
             // (a closed hull has two triangles on each side; a lone side is kept)
-            let keep = match pair {
-                [(e, f), (e2, g)] if e == e2 => !coplanar(*f, *g),
-                _ => true,
-            };
-            if keep {
-                edges.push(pair[0].0);
+            match pair {
+                [(e, f), (e2, g)] if e == e2 => {
+                    if !coplanar(*f, *g) {
+                        edges.push((*e, *f, Some(*g)));
+                    }
+                }
+                _ => edges.push((pair[0].0, pair[0].1, None)),
             }
         }
-        edges.dedup();
+        edges.dedup_by_key(|e| e.0);
         edges
+    }
+
+    /// The hull's edges with the normals of their two faces.
+    pub fn edge_faces(&self) -> &[HullEdge] {
+        &self.edge_faces
+    }
+
+    /// A point inside the hull (the mean of its vertices; geom frame).
+    pub fn interior(&self) -> Vector3<f64> {
+        self.interior
+    }
+
+    /// The support function along `u` (geom frame): the largest `v · u` over the vertices.
+    pub fn support(&self, u: &Vector3<f64>) -> f64 {
+        (self.vertices.iter())
+            .map(|v| v.dot(u))
+            .fold(f64::NEG_INFINITY, f64::max)
     }
 
     /// The largest distance of a vertex from the geom origin (m).

@@ -179,6 +179,7 @@ impl Contact {
             Feature::SolidCore { b, .. } => (0.0, b.radius()),
             Feature::BoxEdge { .. } => (0.0, 0.0),
             Feature::CapsuleEdge { a, .. } => (a.radius, 0.0),
+            Feature::EdgeCrossing { .. } => (0.0, 0.0),
         }
     }
 }
@@ -392,6 +393,16 @@ pub fn witness_frozen_at(
                 a, half_extents_b, ..
             },
         ) => box_edges::capsule_apart((a.half_length, a.radius), wa, half_extents_b, wb),
+        (
+            Some(frozen @ (Frozen::Crossing { .. } | Frozen::NoCrossing)),
+            Feature::EdgeCrossing { a, b, .. },
+        ) => match (geometry::polytope(a), geometry::polytope(b), frozen) {
+            (Some(pa), Some(pb), Frozen::Crossing { a, b, sign }) => {
+                box_edges::polytope_edge_edge(pa, wa, pb, wb, (a, b, sign))
+            }
+            (Some(pa), Some(pb), _) => box_edges::polytope_apart(pa, wa, pb, wb),
+            _ => box_edges::centres_apart(wa, wb),
+        },
         _ => geometry::evaluate(&c.feature, &ga.shape, wa, &gb.shape, wb),
     }
 }
@@ -624,7 +635,9 @@ fn box_crossing_at(
     memo: &mut BoxPairMemo,
 ) -> Option<Frozen> {
     let slot = match &c.feature {
-        Feature::BoxEdge { slot, .. } | Feature::CapsuleEdge { slot, .. } => *slot,
+        Feature::BoxEdge { slot, .. }
+        | Feature::CapsuleEdge { slot, .. }
+        | Feature::EdgeCrossing { slot, .. } => *slot,
         _ => return None,
     };
     let key = (c.geom_a, c.geom_b);
@@ -655,6 +668,12 @@ pub fn crossings_at(feature: &Feature, (wa, wb): (&GeomPose, &GeomPose)) -> Cros
         Feature::CapsuleEdge {
             a, half_extents_b, ..
         } => box_edges::capsule_crossings((a.half_length, a.radius), wa, half_extents_b, wb),
+        Feature::EdgeCrossing { a, b, .. } => {
+            match (geometry::polytope(a), geometry::polytope(b)) {
+                (Some(pa), Some(pb)) => box_edges::polytope_crossings(pa, wa, pb, wb),
+                _ => Crossings::default(),
+            }
+        }
         _ => Crossings::default(),
     }
 }
@@ -671,6 +690,14 @@ pub fn crossing_pair_gap(feature: &Feature, (wa, wb): (&GeomPose, &GeomPose)) ->
         Feature::CapsuleEdge {
             a, half_extents_b, ..
         } => (wa.pos - wb.pos).norm() - a.half_length - a.radius - half_extents_b.norm(),
+        Feature::EdgeCrossing { a, b, .. } => {
+            let radius = |s: &geometry::Solid| match s {
+                geometry::Solid::Box { half_extents } => half_extents.norm(),
+                geometry::Solid::Hull(h) => h.radius(),
+                geometry::Solid::Cylinder { .. } => f64::INFINITY,
+            };
+            (wa.pos - wb.pos).norm() - radius(a) - radius(b)
+        }
         _ => f64::NEG_INFINITY,
     }
 }

@@ -27,7 +27,8 @@
 
 use nalgebra::Vector3;
 
-use super::{GeomPose, Witness};
+use super::{ConvexHull, GeomPose, Witness};
+use crate::contact::hull::HullEdge;
 
 /// Edge candidates per box pair: a contact polygon has at most eight crossings.
 pub const EDGE_SLOTS: usize = 8;
@@ -300,6 +301,12 @@ pub fn apart(
     apart_by((pose_a, half_a.norm()), (pose_b, half_b.norm()))
 }
 
+/// The distance of two geoms' origins, along the line between them (a witness that holds, for
+/// a slot of solids without edges).
+pub fn centres_apart(pose_a: &GeomPose, pose_b: &GeomPose) -> Witness {
+    apart_by((pose_a, 0.0), (pose_b, 0.0))
+}
+
 /// [`apart`] for two geoms of these bounding radii about their origins.
 fn apart_by((pose_a, ra): (&GeomPose, f64), (pose_b, rb): (&GeomPose, f64)) -> Witness {
     let d = pose_a.pos - pose_b.pos;
@@ -475,6 +482,227 @@ pub fn slide_pair_never_crosses(
     })
 }
 
+/// Most edge pairs a pair of polytopes is searched over for crossings ([`polytope_crossings`]):
+/// 64 edges against 64. Hulls with more edges (detailed collision meshes) meet only at their
+/// vertices, as before edge crossings.
+pub const MAX_EDGE_PAIRS: usize = 4096;
+
+/// A box or a mesh's hull as the crossing search sees it.
+#[derive(Clone, Copy, Debug)]
+pub enum Polytope<'a> {
+    /// A box of these half extents.
+    Box(&'a Vector3<f64>),
+    /// A hull.
+    Hull(&'a ConvexHull),
+}
+
+impl Polytope<'_> {
+    /// How many edges.
+    pub fn edge_count(&self) -> usize {
+        match self {
+            Polytope::Box(_) => 12,
+            Polytope::Hull(h) => h.edge_faces().len(),
+        }
+    }
+
+    /// Edge `e` with its faces' normals, in the geom frame.
+    fn edge(&self, e: usize) -> HullEdge {
+        match self {
+            Polytope::Box(half) => {
+                let (centre, direction, half_length) = box_edge(half, e);
+                let k = e / 4;
+                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                HullEdge {
+                    centre,
+                    direction,
+                    half_length,
+                    faces: [
+                        Vector3::ith(i, centre[i].signum()),
+                        Vector3::ith(j, centre[j].signum()),
+                    ],
+                }
+            }
+            Polytope::Hull(h) => h.edge_faces()[e],
+        }
+    }
+
+    /// Edge `e` in the world: midpoint, direction, half length, faces' normals.
+    fn world_edge(&self, pose: &GeomPose, e: usize) -> HullEdge {
+        let x = self.edge(e);
+        HullEdge {
+            centre: pose.transform_point(&x.centre),
+            direction: pose.rot * x.direction,
+            half_length: x.half_length,
+            faces: x.faces.map(|f| pose.rot * f),
+        }
+    }
+
+    /// A point inside, in the world.
+    fn interior(&self, pose: &GeomPose) -> Vector3<f64> {
+        match self {
+            Polytope::Box(_) => pose.pos,
+            Polytope::Hull(h) => pose.transform_point(&h.interior()),
+        }
+    }
+
+    /// Half the thickness along the world direction `u`.
+    fn half_thickness(&self, pose: &GeomPose, u: &Vector3<f64>) -> f64 {
+        match self {
+            Polytope::Box(half) => half_thickness(half, pose, u),
+            Polytope::Hull(h) => {
+                let local = pose.rot.transpose() * u;
+                0.5 * (h.support(&local) + h.support(&-local))
+            }
+        }
+    }
+
+    /// Whether the world point `x` lies inside (or on) it.
+    fn contains(&self, pose: &GeomPose, x: &Vector3<f64>) -> bool {
+        let q = pose.rot.transpose() * (x - pose.pos);
+        match self {
+            Polytope::Box(half) => (0..3).all(|k| q[k].abs() <= half[k] * (1.0 + 1e-9) + 1e-12),
+            Polytope::Hull(h) => h
+                .planes()
+                .all(|(n, d)| n.dot(&q) <= d + 1e-9 * h.radius() + 1e-12),
+        }
+    }
+
+    /// Radius of a sphere about the geom origin that holds it.
+    fn radius(&self) -> f64 {
+        match self {
+            Polytope::Box(half) => half.norm(),
+            Polytope::Hull(h) => h.radius(),
+        }
+    }
+}
+
+/// Whether the unit `u` (normal to the edge) lies in the cone of the edge's two face normals,
+/// within [`TIE`]: the edge then supports its solid along `u`.
+fn supports(edge: &HullEdge, u: &Vector3<f64>) -> bool {
+    let [f1, f2] = edge.faces;
+    let g = f1.cross(&f2);
+    let gg = g.norm_squared();
+    if gg < 1e-12 {
+        return u.dot(&f1) > 1.0 - TIE; // (a flat edge: its face)
+    }
+    let alpha = u.cross(&f2).dot(&g) / gg;
+    let beta = f1.cross(u).dot(&g) / gg;
+    alpha >= -TIE && beta >= -TIE
+}
+
+/// The edge crossings of two polytopes (a box and a hull, or two hulls) at these poses: as
+/// [`crossings`], over every pair of their edges, an edge supporting its solid along the
+/// crossing's normal where that normal lies in the cone of its two faces' normals. None when
+/// the pair has more than [`MAX_EDGE_PAIRS`] edge pairs.
+pub fn polytope_crossings(
+    a: Polytope<'_>,
+    pose_a: &GeomPose,
+    b: Polytope<'_>,
+    pose_b: &GeomPose,
+) -> Crossings {
+    // (and edge indices fit a byte)
+    let most = a.edge_count().max(b.edge_count());
+    if a.edge_count() * b.edge_count() > MAX_EDGE_PAIRS || most > usize::from(u8::MAX) {
+        return Crossings::default();
+    }
+    let edges_b: Vec<HullEdge> = (0..b.edge_count())
+        .map(|e| b.world_edge(pose_b, e))
+        .collect();
+    let centres = a.interior(pose_a) - b.interior(pose_b);
+    let mut found = Vec::new();
+    for ea in 0..a.edge_count() {
+        let x = a.world_edge(pose_a, ea);
+        for (eb, y) in edges_b.iter().enumerate() {
+            let cross = x.direction.cross(&y.direction);
+            let sine = cross.norm();
+            if sine < PARALLEL {
+                continue;
+            }
+            let sign = if cross.dot(&centres) >= 0.0 {
+                1.0
+            } else {
+                -1.0
+            };
+            let n = cross * (sign / sine);
+            // each edge supports its solid along the normal, and the normal points into the
+            // other side's solid at the edge (a sharp edge's cone of normals reaches past its
+            // faces' tangent planes: there an edge point moved along the normal leaves the
+            // solid, and a negative distance says nothing of overlap)
+            let into = |e: &HullEdge, u: &Vector3<f64>| e.faces.iter().all(|f| f.dot(u) >= -TIE);
+            if !supports(&x, &-n) || !supports(y, &n) || !into(&x, &-n) || !into(y, &n) {
+                continue;
+            }
+            let (s, t) = line_params((&x.centre, &x.direction), (&y.centre, &y.direction));
+            let inside = s.abs() < x.half_length * (1.0 - INTERIOR)
+                && t.abs() < y.half_length * (1.0 - INTERIOR);
+            if !inside {
+                continue;
+            }
+            let phi = n.dot(&(x.centre - y.centre));
+            let deepest = -a
+                .half_thickness(pose_a, &n)
+                .min(b.half_thickness(pose_b, &n));
+            // crossed through, the two edge points must lie in each other's solids
+            let (pa, pb) = (x.centre + s * x.direction, y.centre + t * y.direction);
+            let overlapping = phi >= 0.0 || (b.contains(pose_b, &pa) && a.contains(pose_a, &pb));
+            if phi > deepest && overlapping {
+                found.push(Crossing {
+                    a: ea as u8,
+                    b: eb as u8,
+                    sign,
+                    phi,
+                });
+            }
+        }
+    }
+    Crossings::deepest(&mut found, EDGE_SLOTS)
+}
+
+/// The crossing of A's edge `a` and B's edge `b` of two polytopes held for a step (as
+/// [`edge_edge`] for boxes).
+pub fn polytope_edge_edge(
+    pa: Polytope<'_>,
+    pose_a: &GeomPose,
+    pb: Polytope<'_>,
+    pose_b: &GeomPose,
+    (a, b, sign): (u8, u8, f64),
+) -> Witness {
+    let in_range = |p: &Polytope<'_>, e: u8| usize::from(e) < p.edge_count();
+    if !in_range(&pa, a) || !in_range(&pb, b) {
+        return polytope_apart(pa, pose_a, pb, pose_b);
+    }
+    let (x, y) = (
+        pa.world_edge(pose_a, usize::from(a)),
+        pb.world_edge(pose_b, usize::from(b)),
+    );
+    lines_witness((&x.centre, &x.direction), (&y.centre, &y.direction), sign)
+        .unwrap_or_else(|| polytope_apart(pa, pose_a, pb, pose_b))
+}
+
+/// [`apart`] for two polytopes.
+pub fn polytope_apart(
+    pa: Polytope<'_>,
+    pose_a: &GeomPose,
+    pb: Polytope<'_>,
+    pose_b: &GeomPose,
+) -> Witness {
+    apart_by((pose_a, pa.radius()), (pose_b, pb.radius()))
+}
+
+/// [`slot_witness`] for two polytopes.
+pub fn polytope_slot_witness(
+    slot: usize,
+    pa: Polytope<'_>,
+    pose_a: &GeomPose,
+    pb: Polytope<'_>,
+    pose_b: &GeomPose,
+) -> Witness {
+    match polytope_crossings(pa, pose_a, pb, pose_b).slot(slot) {
+        Some(c) => polytope_edge_edge(pa, pose_a, pb, pose_b, (c.a, c.b, c.sign)),
+        None => polytope_apart(pa, pose_a, pb, pose_b),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -587,6 +815,36 @@ mod tests {
         // turned pads: not shown
         let turned = pose([0.0, -0.02, 0.0445], [0.0, 0.3, 0.0]);
         assert!(!slide_pair_never_crosses(&big, &turned, &big, &left, &y));
+    }
+
+    #[test]
+    fn the_polytope_search_finds_the_box_search_crossings() {
+        // random poses of two boxes near each other: the generic search over every edge pair
+        // (as for hulls) finds the crossings the boxes' own search finds
+        let mut rng = crate::solver::test_rng::Rng(5);
+        let (ha, hb) = (Vector3::new(0.1, 0.07, 0.05), Vector3::new(0.08, 0.12, 0.06));
+        let mut seen = 0;
+        for _ in 0..400 {
+            let r = |rng: &mut crate::solver::test_rng::Rng, s: f64| {
+                [0; 3].map(|_| s * (2.0 * rng.next() - 1.0))
+            };
+            let pa = pose(r(&mut rng, 0.12), r(&mut rng, 3.0));
+            let pb = pose([0.0; 3], r(&mut rng, 3.0));
+            let boxes = crossings(&ha, &pa, &hb, &pb);
+            let generic = polytope_crossings(Polytope::Box(&ha), &pa, Polytope::Box(&hb), &pb);
+            for k in 0..EDGE_SLOTS {
+                match (boxes.slot(k), generic.slot(k)) {
+                    (Some(x), Some(y)) => {
+                        assert_eq!((x.a, x.b, x.sign), (y.a, y.b, y.sign));
+                        assert!((x.phi - y.phi).abs() < 1e-12);
+                        seen += 1;
+                    }
+                    (None, None) => {}
+                    other => panic!("slot {k}: {other:?}"),
+                }
+            }
+        }
+        assert!(seen > 100, "{seen}");
     }
 
     #[test]

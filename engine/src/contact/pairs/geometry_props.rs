@@ -106,7 +106,9 @@ fn unique_witness(f: &Feature, w: &Witness, pa: &GeomPose, pb: &GeomPose) -> boo
             solid_unique(&surface, a, pa) && solid_unique(&core, a, pa) && smooth_around(f, pa, pb)
         }
         // (the slot's crossing is found anew at each pose: smooth away from a change of it)
-        Feature::BoxEdge { .. } | Feature::CapsuleEdge { .. } => smooth_around(f, pa, pb),
+        Feature::BoxEdge { .. } | Feature::CapsuleEdge { .. } | Feature::EdgeCrossing { .. } => {
+            smooth_around(f, pa, pb)
+        }
     }
 }
 
