@@ -42,6 +42,15 @@ def cartpole():
     return tight(b.compile()), np.array([0.1, 0.2, 0.3, -0.5])
 
 
+def settled(b, nsteps):
+    """The compiled (tight) model of ``b`` and its state after ``nsteps`` unactuated steps."""
+    m = tight(b.compile())
+    s = m.make_state()
+    for _ in range(nsteps):
+        s, _ = ukemi.step(m, s, np.zeros(m.nu))
+    return m, s
+
+
 def sliding_box():
     b = ukemi.ModelBuilder(timestep=0.01)
     b.add_geom("floor", body="world", shape="plane", friction=0.3)
@@ -49,10 +58,7 @@ def sliding_box():
     b.add_joint("free", kind="floating", parent="world", child="box")
     b.add_geom("box", body="box", shape="box", size=(0.05, 0.05, 0.05), friction=0.3)
     b.add_actuator("push", joint="free", gear=1.0)
-    m = tight(b.compile())
-    s = m.make_state()
-    for _ in range(20):
-        s, _ = ukemi.step(m, s, [0.0])
+    m, s = settled(b, 20)
     x = np.concatenate([s.qpos, [1.0, 0.2, 0.0, 0.0, 0.0, 0.0]])  # sliding at ~1 m/s
     return m, x
 
@@ -78,10 +84,7 @@ def turned_cube():
     b.add_joint("free", kind="floating", parent="world", child="cube")
     b.add_geom("cube", body="cube", shape="box", size=(0.1, 0.1, 0.1), friction=0.5)
     b.add_actuator("push", joint="free", gear=1.0)
-    m = tight(b.compile())
-    s = m.make_state()
-    for _ in range(30):
-        s, _ = ukemi.step(m, s, [0.0])
+    m, s = settled(b, 30)
     return m, np.concatenate([s.qpos, s.qvel])
 
 
@@ -96,10 +99,7 @@ def capsule_bridge():
     b.add_joint("free", kind="floating", parent="world", child="bar")
     b.add_geom("bar", body="bar", shape="capsule", size=(0.02, 0.35), friction=0.5)
     b.add_actuator("push", joint="free", gear=1.0)
-    m = tight(b.compile())
-    s = m.make_state()
-    for _ in range(30):
-        s, _ = ukemi.step(m, s, [0.0])
+    m, s = settled(b, 30)
     return m, np.concatenate([s.qpos, s.qvel])
 
 

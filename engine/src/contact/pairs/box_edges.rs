@@ -167,6 +167,23 @@ pub fn cross_separation(
     best
 }
 
+/// The unit common normal `n = sign (d_a × d_b)/|d_a × d_b|` of two edge directions, oriented
+/// from B towards A by the line of the two solids' interior points (`centres = c_a − c_b`), and
+/// `sign`; `None` when the edges are near parallel ([`PARALLEL`]).
+fn common_normal(
+    da: &Vector3<f64>,
+    db: &Vector3<f64>,
+    centres: &Vector3<f64>,
+) -> Option<(Vector3<f64>, f64)> {
+    let cross = da.cross(db);
+    let sine = cross.norm();
+    if sine < PARALLEL {
+        return None;
+    }
+    let sign = if cross.dot(centres) >= 0.0 { 1.0 } else { -1.0 };
+    Some((cross * (sign / sine), sign))
+}
+
 /// The edge crossings of boxes A and B at these poses (see the module's documentation).
 pub fn crossings(
     half_a: &Vector3<f64>,
@@ -188,17 +205,9 @@ pub fn crossings(
         let da = pose_a.rot.column(i).into_owned();
         for j in 0..3 {
             let db = pose_b.rot.column(j).into_owned();
-            let cross = da.cross(&db);
-            let sine = cross.norm();
-            if sine < PARALLEL {
+            let Some((n, sign)) = common_normal(&da, &db, &centres) else {
                 continue;
-            }
-            let sign = if cross.dot(&centres) >= 0.0 {
-                1.0
-            } else {
-                -1.0
             };
-            let n = cross * (sign / sine);
             let deepest =
                 -half_thickness(half_a, pose_a, &n).min(half_thickness(half_b, pose_b, &n));
             let [a1, a2] = supporting_signs(pose_a, i, &-n);
@@ -347,17 +356,9 @@ pub fn capsule_crossings(
     let mut found = Vec::with_capacity(4);
     for e in 0..12 {
         let (cb, db, hb) = world_edge(half_b, pose_b, e);
-        let cross = da.cross(&db);
-        let sine = cross.norm();
-        if sine < PARALLEL {
+        let Some((n, sign)) = common_normal(&da, &db, &centres) else {
             continue;
-        }
-        let sign = if cross.dot(&centres) >= 0.0 {
-            1.0
-        } else {
-            -1.0
         };
-        let n = cross * (sign / sine);
         // the edge supports the box along n: n makes no obtuse angle with its two faces
         let (local, _, _) = box_edge(half_b, e);
         let k = e / 4;
@@ -613,17 +614,9 @@ pub fn polytope_crossings(
     for ea in 0..a.edge_count() {
         let x = a.world_edge(pose_a, ea);
         for (eb, y) in edges_b.iter().enumerate() {
-            let cross = x.direction.cross(&y.direction);
-            let sine = cross.norm();
-            if sine < PARALLEL {
+            let Some((n, sign)) = common_normal(&x.direction, &y.direction, &centres) else {
                 continue;
-            }
-            let sign = if cross.dot(&centres) >= 0.0 {
-                1.0
-            } else {
-                -1.0
             };
-            let n = cross * (sign / sine);
             // each edge supports its solid along the normal, and the normal points into the
             // other side's solid at the edge (a sharp edge's cone of normals reaches past its
             // faces' tangent planes: there an edge point moved along the normal leaves the
@@ -822,7 +815,10 @@ mod tests {
         // random poses of two boxes near each other: the generic search over every edge pair
         // (as for hulls) finds the crossings the boxes' own search finds
         let mut rng = crate::solver::test_rng::Rng(5);
-        let (ha, hb) = (Vector3::new(0.1, 0.07, 0.05), Vector3::new(0.08, 0.12, 0.06));
+        let (ha, hb) = (
+            Vector3::new(0.1, 0.07, 0.05),
+            Vector3::new(0.08, 0.12, 0.06),
+        );
         let mut seen = 0;
         for _ in 0..400 {
             let r = |rng: &mut crate::solver::test_rng::Rng, s: f64| {
