@@ -143,21 +143,29 @@ def test_turned_stacks_of_random_cubes_stand():
     np.testing.assert_allclose(np.diff(tops), np.diff(traj.qpos[0, 2::7]) - 0.002, atol=1e-7)
 
 
-BRIDGE = """<mujoco><option timestep="0.01"/><worldbody>
+def bridge_xml(block):
+    """A capsule lying across two blocks (boxes or cube meshes) with a gap between them."""
+    geom = {"box": '<geom type="box" size="0.1 0.1 0.1" pos="0 {y} 0.1"/>',
+            "mesh": '<geom type="mesh" mesh="block" pos="0 {y} 0.1"/>'}[block]
+    block_mesh = " ".join(f"{sx * 0.1} {sy * 0.1} {sz * 0.1}"
+                          for sx in (1, -1) for sy in (1, -1) for sz in (1, -1))
+    return f"""<mujoco><option timestep="0.01"/>
+  <asset><mesh name="block" vertex="{block_mesh}"/></asset><worldbody>
   <geom type="plane" size="2 2 0.1"/>
-  <geom type="box" size="0.1 0.1 0.1" pos="0 0.2 0.1"/>
-  <geom type="box" size="0.1 0.1 0.1" pos="0 -0.2 0.1"/>
+  {geom.format(y=0.2)}
+  {geom.format(y=-0.2)}
   <body pos="0.02 0 0.225" euler="90 0 0"><freejoint/>
     <geom type="capsule" size="0.02 0.35" mass="1"/></body>
 </worldbody></mujoco>"""
 
 
-def test_a_capsule_bridging_two_boxes_rests_on_their_edges():
-    """A capsule lying across two boxes with a gap between them, its end spheres beyond their
-    outer sides and its middle sphere over the gap: only the crossings of its segment with the
-    boxes' top edges can hold it (with the three spheres alone it fell through), at the
-    analytic height to 1e-8 m, still; MuJoCo rests it within 1 mm."""
-    assert_rests(BRIDGE, 100, 2, 0.22)
+@pytest.mark.parametrize("block", ["box", "mesh"])
+def test_a_capsule_bridging_two_blocks_rests_on_their_edges(block):
+    """A capsule lying across two boxes (or cube meshes) with a gap between them, its end
+    spheres beyond their outer sides and its middle sphere over the gap: only the crossings of
+    its segment with the blocks' top edges can hold it (with the three spheres alone it fell
+    through), at the analytic height to 1e-8 m, still; MuJoCo rests it within 1 mm."""
+    assert_rests(bridge_xml(block), 100, 2, 0.22)
 
 
 @pytest.mark.parametrize(("dy", "turn"), [(0.15, 90.0), (0.1, 60.0)])

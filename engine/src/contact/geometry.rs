@@ -40,7 +40,7 @@
 //! | box – box | 24: each corner of A against B, each corner of B against A, and eight slots for the points where an edge of A crosses an edge of B (`pairs/box_edges.rs`) |
 //! | mesh – plane | one per hull vertex |
 //! | sphere / point – mesh | 1: signed distance of the centre to the hull, minus the radius |
-//! | capsule – mesh | 3: end spheres and the midpoint sphere against the hull |
+//! | capsule – mesh | 5: end spheres and the midpoint sphere against the hull, and two slots for where the segment crosses the hull's edges (hulls of up to 255 edges) |
 //! | box – mesh | each corner of the box against the hull, each hull vertex against the box, and eight slots for edge crossings (`pairs/box_edges.rs`) |
 //! | mesh – mesh | each hull vertex of A against B's hull, and of B against A's, and eight slots for edge crossings (hulls of up to 255 edges, 4096 edge pairs) |
 //! | sphere / point – cylinder | 1: signed distance of the centre to the cylinder, minus the radius |
@@ -66,9 +66,8 @@
 //! ## Limitations
 //! Ellipsoids only collide with planes; plane–plane is unsupported. A box's or hull's edge
 //! across a cylinder's rim is not detected; deep inside a solid (a rim or segment crossing it)
-//! the nearest point ties two faces and the witness normal is one face's. Capsule–mesh only
-//! tests three spheres on the segment, so a capsule crossing a hull's edge between them is not
-//! detected (capsule–box has its edge crossings). Box–mesh and mesh–mesh pairs of hulls with
+//! the nearest point ties two faces and the witness normal is one face's. Box–mesh,
+//! capsule–mesh and mesh–mesh pairs of hulls with
 //! more than 255 edges or 4096 edge pairs only test vertices, so edge–edge contact between
 //! detailed meshes is not detected. Capsule–capsule tests the ends of A only,
 //! so parallel capsules are supported at two points only where A's ends lie alongside B's
@@ -381,15 +380,15 @@ pub enum Feature {
         /// The box or hull of B.
         b: Solid,
     },
-    /// One of a capsule–box pair's [`box_edges::CAPSULE_SLOTS`] crossings: capsule A's
-    /// segment across an edge of box B ([`box_edges::capsule_crossings`]).
+    /// One of a capsule–box or capsule–mesh pair's [`box_edges::CAPSULE_SLOTS`] crossings:
+    /// capsule A's segment across an edge of B ([`box_edges::capsule_crossings`]).
     CapsuleEdge {
         /// Which of the pair's crossings (ordered by their edges).
         slot: u8,
         /// The capsule core of A.
         a: Segment,
-        /// Half extents of box B.
-        half_extents_b: Vector3<f64>,
+        /// The box or hull of B.
+        b: Solid,
     },
     /// One of a box pair's [`box_edges::EDGE_SLOTS`] edge crossings: an edge of box A across
     /// an edge of box B ([`box_edges`]).
@@ -487,17 +486,16 @@ pub fn evaluate(
             // (slots are made for boxes and hulls only)
             _ => box_edges::centres_apart(pose_a, pose_b),
         },
-        Feature::CapsuleEdge {
-            slot,
-            a,
-            half_extents_b,
-        } => box_edges::capsule_slot_witness(
-            usize::from(*slot),
-            (a.half_length, a.radius),
-            pose_a,
-            half_extents_b,
-            pose_b,
-        ),
+        Feature::CapsuleEdge { slot, a, b } => match polytope(b) {
+            Some(pb) => box_edges::capsule_slot_witness(
+                usize::from(*slot),
+                (a.half_length, a.radius),
+                pose_a,
+                pb,
+                pose_b,
+            ),
+            None => box_edges::centres_apart(pose_a, pose_b),
+        },
         Feature::BoxEdge {
             slot,
             half_extents_a,
@@ -856,11 +854,7 @@ fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
                 a: ball,
                 half_extents_b: half_extents,
             });
-            let crossings = (0..box_edges::CAPSULE_SLOTS as u8).map(|slot| Feature::CapsuleEdge {
-                slot,
-                a,
-                half_extents_b: half_extents,
-            });
+            let crossings = capsule_slots(a, Solid::Box { half_extents });
             Some(balls.into_iter().chain(crossings).collect())
         }
         // the segment's point nearest the cylinder, then the end spheres
@@ -876,21 +870,34 @@ fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
             });
             Some([first].into_iter().chain(rest).collect())
         }
-        // as against a box: the end spheres and the midpoint sphere
+        // as against a box: the end spheres and the midpoint sphere, then the segment's
+        // crossings of the hull's edges (hulls of up to 255 edges)
         Shape::Mesh { ref hull } => {
             let middle = ball(Vector3::zeros(), a.radius);
-            let balls = [ends[0], middle, ends[1]];
-            Some(
-                balls
-                    .map(|a| Feature::SphereHull {
-                        a,
-                        hull_b: hull.clone(),
-                    })
-                    .to_vec(),
-            )
+            let balls = [ends[0], middle, ends[1]].map(|ball| Feature::SphereHull {
+                a: ball,
+                hull_b: hull.clone(),
+            });
+            let crossings = if hull.edge_faces().len() <= usize::from(u8::MAX) {
+                capsule_slots(a, Solid::Hull(hull.clone()))
+            } else {
+                Vec::new()
+            };
+            Some(balls.into_iter().chain(crossings).collect())
         }
         _ => None,
     }
+}
+
+/// The crossing slots of capsule core `a` against box or hull `b`.
+fn capsule_slots(a: Segment, b: Solid) -> Vec<Feature> {
+    (0..box_edges::CAPSULE_SLOTS as u8)
+        .map(|slot| Feature::CapsuleEdge {
+            slot,
+            a,
+            b: b.clone(),
+        })
+        .collect()
 }
 
 /// Box A against mesh B: the corners of A against B's hull, the hull's vertices against A,

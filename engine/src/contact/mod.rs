@@ -382,17 +382,18 @@ pub fn witness_frozen_at(
             },
         ) => box_edges::apart(half_extents_a, wa, half_extents_b, wb),
         (
-            Some(Frozen::Crossing { b, sign, .. }),
-            Feature::CapsuleEdge {
-                a, half_extents_b, ..
-            },
-        ) => box_edges::capsule_edge((a.half_length, a.radius), wa, half_extents_b, wb, (b, sign)),
-        (
-            Some(Frozen::NoCrossing),
-            Feature::CapsuleEdge {
-                a, half_extents_b, ..
-            },
-        ) => box_edges::capsule_apart((a.half_length, a.radius), wa, half_extents_b, wb),
+            Some(frozen @ (Frozen::Crossing { .. } | Frozen::NoCrossing)),
+            Feature::CapsuleEdge { a, b, .. },
+        ) => {
+            let capsule = (a.half_length, a.radius);
+            match (geometry::polytope(b), frozen) {
+                (Some(pb), Frozen::Crossing { b, sign, .. }) => {
+                    box_edges::capsule_edge(capsule, wa, pb, wb, (b, sign))
+                }
+                (Some(pb), _) => box_edges::capsule_apart(capsule, wa, pb, wb),
+                _ => box_edges::centres_apart(wa, wb),
+            }
+        }
         (
             Some(frozen @ (Frozen::Crossing { .. } | Frozen::NoCrossing)),
             Feature::EdgeCrossing { a, b, .. },
@@ -665,9 +666,10 @@ pub fn crossings_at(feature: &Feature, (wa, wb): (&GeomPose, &GeomPose)) -> Cros
             half_extents_b: hb,
             ..
         } => box_edges::crossings(ha, wa, hb, wb),
-        Feature::CapsuleEdge {
-            a, half_extents_b, ..
-        } => box_edges::capsule_crossings((a.half_length, a.radius), wa, half_extents_b, wb),
+        Feature::CapsuleEdge { a, b, .. } => match geometry::polytope(b) {
+            Some(pb) => box_edges::capsule_crossings((a.half_length, a.radius), wa, pb, wb),
+            None => Crossings::default(),
+        },
         Feature::EdgeCrossing { a, b, .. } => {
             match (geometry::polytope(a), geometry::polytope(b)) {
                 (Some(pa), Some(pb)) => box_edges::polytope_crossings(pa, wa, pb, wb),
@@ -687,18 +689,23 @@ pub fn crossing_pair_gap(feature: &Feature, (wa, wb): (&GeomPose, &GeomPose)) ->
             half_extents_b: hb,
             ..
         } => geometry::box_box_axis(ha, wa, hb, wb).0,
-        Feature::CapsuleEdge {
-            a, half_extents_b, ..
-        } => (wa.pos - wb.pos).norm() - a.half_length - a.radius - half_extents_b.norm(),
+        Feature::CapsuleEdge { a, b, .. } => {
+            (wa.pos - wb.pos).norm() - a.half_length - a.radius - solid_radius(b)
+        }
         Feature::EdgeCrossing { a, b, .. } => {
-            let radius = |s: &geometry::Solid| match s {
-                geometry::Solid::Box { half_extents } => half_extents.norm(),
-                geometry::Solid::Hull(h) => h.radius(),
-                geometry::Solid::Cylinder { .. } => f64::INFINITY,
-            };
-            (wa.pos - wb.pos).norm() - radius(a) - radius(b)
+            (wa.pos - wb.pos).norm() - solid_radius(a) - solid_radius(b)
         }
         _ => f64::NEG_INFINITY,
+    }
+}
+
+/// Radius of a sphere about a solid's geom origin that holds it (infinite for a cylinder:
+/// edge slots are made for boxes and hulls only).
+fn solid_radius(solid: &geometry::Solid) -> f64 {
+    match solid {
+        geometry::Solid::Box { half_extents } => half_extents.norm(),
+        geometry::Solid::Hull(h) => h.radius(),
+        geometry::Solid::Cylinder { .. } => f64::INFINITY,
     }
 }
 

@@ -338,34 +338,36 @@ fn apart_by((pose_a, ra): (&GeomPose, f64), (pose_b, rb): (&GeomPose, f64)) -> W
 pub const CAPSULE_SLOTS: usize = 2;
 
 /// The crossings of a capsule's segment (A: the segment `c ± t z` of its geom frame, half
-/// length `half`, radius `radius`) with a box's edges (B), at most [`CAPSULE_SLOTS`]: for
-/// each edge not near parallel to the segment, the common normal `n` oriented from the box
-/// towards the capsule (by their centres), kept when the edge supports the box along `n`, the
-/// two lines' closest points lie inside the segment and the edge, and, crossed through, the
-/// edge still inside the capsule (`φ > −2r`). `φ = n · (c_a − c_b) − r`. A capsule lying
-/// across a box (its middle sphere off the face, or across an edge) rests on these: with its
-/// three spheres alone a capsule dropped across a ridge sank 14 cm.
+/// length `half`, radius `radius`) with the edges of a box or hull (B), at most
+/// [`CAPSULE_SLOTS`]: for each edge not near parallel to the segment, the common normal `n`
+/// oriented from B towards the capsule (by a point inside each), kept when the edge supports B
+/// along `n` (for a hull, as [`polytope_crossings`] asks), the two lines' closest points lie
+/// inside the segment and the edge, and, crossed through, the edge still inside the capsule
+/// (`φ > −2r`). `φ = n · (c_a − c_b) − r`. A capsule lying across a box (its middle sphere off
+/// the face, or across an edge) rests on these: with its three spheres alone a capsule
+/// dropped across a ridge sank 14 cm.
 pub fn capsule_crossings(
     (half, radius): (f64, f64),
     pose_a: &GeomPose,
-    half_b: &Vector3<f64>,
+    b: Polytope<'_>,
     pose_b: &GeomPose,
 ) -> Crossings {
+    if b.edge_count() > usize::from(u8::MAX) {
+        return Crossings::default();
+    }
     let (ca, da) = (pose_a.pos, pose_a.rot.column(2).into_owned());
-    let centres = ca - pose_b.pos;
+    let centres = ca - b.interior(pose_b);
     let mut found = Vec::with_capacity(4);
-    for e in 0..12 {
-        let (cb, db, hb) = world_edge(half_b, pose_b, e);
+    for e in 0..b.edge_count() {
+        let y = b.world_edge(pose_b, e);
+        let (cb, db, hb) = (y.centre, y.direction, y.half_length);
         let Some((n, sign)) = common_normal(&da, &db, &centres) else {
             continue;
         };
-        // the edge supports the box along n: n makes no obtuse angle with its two faces
-        let (local, _, _) = box_edge(half_b, e);
-        let k = e / 4;
-        let supports = [(k + 1) % 3, (k + 2) % 3]
-            .iter()
-            .all(|&i| n.dot(&(pose_b.rot.column(i) * local[i].signum())) >= -TIE);
-        if !supports {
+        // the edge supports B along n: n makes no obtuse angle with its two faces (and, for a
+        // hull's sharp edge, lies in the cone of their normals)
+        let into = y.faces.iter().all(|f| n.dot(f) >= -TIE);
+        if !into || (matches!(b, Polytope::Hull(_)) && !supports(&y, &n)) {
             continue;
         }
         let (s, t) = line_params((&ca, &da), (&cb, &db));
@@ -383,48 +385,51 @@ pub fn capsule_crossings(
     Crossings::deepest(&mut found, CAPSULE_SLOTS)
 }
 
-/// The crossing of a capsule's segment with the box's edge `b` held for a step: the two lines'
+/// The crossing of a capsule's segment with B's edge `b` held for a step: the two lines'
 /// distance along their common normal of orientation `sign`, less the radius.
 pub fn capsule_edge(
-    (half, radius): (f64, f64),
+    capsule: (f64, f64),
     pose_a: &GeomPose,
-    half_b: &Vector3<f64>,
+    pb: Polytope<'_>,
     pose_b: &GeomPose,
     (b, sign): (u8, f64),
 ) -> Witness {
+    if usize::from(b) >= pb.edge_count() {
+        return capsule_apart(capsule, pose_a, pb, pose_b);
+    }
     let (ca, da) = (pose_a.pos, pose_a.rot.column(2).into_owned());
-    let (cb, db, _) = world_edge(half_b, pose_b, usize::from(b).min(11));
-    match lines_witness((&ca, &da), (&cb, &db), sign) {
+    let y = pb.world_edge(pose_b, usize::from(b));
+    match lines_witness((&ca, &da), (&y.centre, &y.direction), sign) {
         Some(w) => Witness {
-            phi: w.phi - radius,
-            point_a: w.point_a - radius * w.normal,
+            phi: w.phi - capsule.1,
+            point_a: w.point_a - capsule.1 * w.normal,
             ..w
         },
-        None => capsule_apart((half, radius), pose_a, half_b, pose_b),
+        None => capsule_apart(capsule, pose_a, pb, pose_b),
     }
 }
 
-/// [`apart`] for a capsule–box slot that holds no crossing.
+/// [`apart`] for a capsule slot that holds no crossing.
 pub fn capsule_apart(
     (half, radius): (f64, f64),
     pose_a: &GeomPose,
-    half_b: &Vector3<f64>,
+    pb: Polytope<'_>,
     pose_b: &GeomPose,
 ) -> Witness {
-    apart_by((pose_a, half + radius), (pose_b, half_b.norm()))
+    apart_by((pose_a, half + radius), (pose_b, pb.radius()))
 }
 
-/// [`slot_witness`] for a capsule–box slot.
+/// [`slot_witness`] for a capsule slot.
 pub fn capsule_slot_witness(
     slot: usize,
     capsule: (f64, f64),
     pose_a: &GeomPose,
-    half_b: &Vector3<f64>,
+    pb: Polytope<'_>,
     pose_b: &GeomPose,
 ) -> Witness {
-    match capsule_crossings(capsule, pose_a, half_b, pose_b).slot(slot) {
-        Some(c) => capsule_edge(capsule, pose_a, half_b, pose_b, (c.b, c.sign)),
-        None => capsule_apart(capsule, pose_a, half_b, pose_b),
+    match capsule_crossings(capsule, pose_a, pb, pose_b).slot(slot) {
+        Some(c) => capsule_edge(capsule, pose_a, pb, pose_b, (c.b, c.sign)),
+        None => capsule_apart(capsule, pose_a, pb, pose_b),
     }
 }
 
