@@ -1,5 +1,5 @@
-//! Box–box edge crossings: the contact points where an edge of one box crosses an edge of the
-//! other ([`super::Feature::BoxEdge`]).
+//! Edge crossings: the contact points where an edge of one box crosses an edge of the other
+//! ([`super::Feature::BoxEdge`]), and the same for hulls and capsules (below).
 //!
 //! A box pair's corner candidates hold a box only where a corner meets the other box. Two boxes
 //! whose edges cross (a cube dropped edge-down across another's edge), or whose faces meet with
@@ -24,6 +24,13 @@
 //! the distance of two fixed lines along their common normal, a smooth function of the poses,
 //! with the lines' closest points as witnesses (exact by the envelope theorem: `δφ = n · (δx_a
 //! − δx_b)` at those points). An empty slot is measured as [`apart`]: never near, never active.
+//!
+//! The same for a box or a mesh's hull against another ([`polytope_crossings`],
+//! [`super::Feature::EdgeCrossing`]: every pair of edges, an edge supporting its solid where
+//! the normal lies in the cone of its two faces' normals and points into the solid at the
+//! edge; crossed through, the two edge points must lie in each other's solids), and for a
+//! capsule's segment against a box's or hull's edges ([`capsule_crossings`],
+//! [`super::Feature::CapsuleEdge`]: two slots, the distance less the capsule's radius).
 
 use nalgebra::Vector3;
 
