@@ -922,8 +922,12 @@ pub(crate) fn refreeze_crossings(model: &Model, state: &State, ws: &mut Workspac
             (other.geom_a, other.geom_b) == (contact.geom_a, contact.geom_b)
                 && other.feature.is_crossing_slot()
         };
-        let slots: Vec<usize> = (c..model.ncontact()).take_while(|k| same_pair(k)).collect();
-        c += slots.len().max(1);
+        // (a pair's slots are consecutive)
+        let end = (c..model.ncontact())
+            .find(|k| !same_pair(k))
+            .unwrap_or(model.ncontact());
+        let slots = c..end.max(c + 1);
+        c = slots.end;
         let (ga, gb) = (&model.geoms[contact.geom_a], &model.geoms[contact.geom_b]);
         // (bounding spheres at the new poses, from `missed_contacts`: apart, nothing crosses)
         if ws.geom_bounds[contact.geom_a].gap(&ws.geom_bounds[contact.geom_b]) > 0.0 {
@@ -937,18 +941,18 @@ pub(crate) fn refreeze_crossings(model: &Model, state: &State, ws: &mut Workspac
         let found = crate::contact::crossings_at(&contact.feature, (&pa, &pb));
         for x in (0..box_edges::EDGE_SLOTS).filter_map(|k| found.slot(k)) {
             let held = |k: &usize| matches!(ws.frozen[*k], Some(Frozen::Crossing { a, b, .. }) if (a, b) == (x.a, x.b));
-            if x.phi >= -CROSSING_REFREEZE_TOL || slots.iter().any(held) {
+            if x.phi >= -CROSSING_REFREEZE_TOL || slots.clone().any(|k| held(&k)) {
                 continue;
             }
-            for &k in &slots {
+            for k in slots.clone() {
                 if !ws.prepared[k] {
                     prepare_candidate_with(model, state, ws, k, &mut memo, None);
                 }
             }
             let free = slots
-                .iter()
-                .find(|&&k| matches!(ws.frozen[k], Some(Frozen::NoCrossing) | None));
-            if let Some(&k) = free {
+                .clone()
+                .find(|&k| matches!(ws.frozen[k], Some(Frozen::NoCrossing) | None));
+            if let Some(k) = free {
                 // its frame at the step's start from the crossing it now holds (built from
                 // the empty slot's far witness, the impulse pushed along the line of the two
                 // centres: random scene 765 gained 15% of its energy in a step)

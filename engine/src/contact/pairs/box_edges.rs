@@ -98,11 +98,6 @@ impl Crossings {
     pub fn slot(&self, slot: usize) -> Option<Crossing> {
         self.found.get(slot).copied().flatten()
     }
-
-    /// Whether some slot holds the crossing of edges `a` and `b`.
-    pub fn holds(&self, a: u8, b: u8) -> bool {
-        self.found.iter().flatten().any(|c| c.a == a && c.b == b)
-    }
 }
 
 /// An edge's world midpoint, direction and half length.
