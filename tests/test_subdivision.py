@@ -220,3 +220,23 @@ def test_a_fast_turn_is_taken_as_sub_steps_and_keeps_the_energy():
 # were refused, is no longer reached since session 43: its links had passed through each other
 # edge on edge on the way there. The refusal is checked directly in engine/src/step.rs,
 # `a_subdivision_ending_above_the_energy_ceiling_is_refused`.)
+
+
+def test_a_step_left_deep_by_its_held_points_is_not_returned_converged():
+    """Random pile 159 (``tests/stress``), step 46: a cylinder falling at 3.5 m/s lands across a
+    standing cylinder's top rim. It touches the rim at the two ends of a chord, and the point
+    held for the step swapped between them at every check round of the solve; when the rounds
+    ran out (the whole step and each subdivision having failed, in the last resort's solve) the
+    step was returned "converged" 1.7 cm deep in the standing cylinder. A solve whose last
+    round still leaves anything deeper than 1 µm is now a failure: that whole step is reported
+    unconverged, and the subdivided step converges within 1e-7 m."""
+    from stress._random_scenes import random_pile
+
+    m, _ = random_pile(159)
+    tr = ukemi.rollout(m, m.make_state(), nsteps=46, on_failure="return")
+    s = tr.final_state
+    _, info = ukemi.step(m.with_options(max_subdivisions=1), s, None, on_failure="return")
+    assert not info.converged  # (was the 1.7 cm deep state, "converged")
+    nxt, info = ukemi.step(m, s, None)
+    assert info.converged and info.subdivisions > 1
+    assert ukemi.signed_distances(m, nxt).min() > -1e-7

@@ -782,14 +782,18 @@ fn disk_rim_at(c: &Contact, (pa, pb): (&GeomPose, &GeomPose), force: bool) -> Op
 /// selects at `state` ([`box_face_for_step`]), so flush boxes report their overlap.
 pub fn signed_distances(model: &crate::Model, state: &crate::State) -> Vec<f64> {
     let pose = |b: usize| if b == 0 { Pose::world() } else { state.pose(b) };
-    model
-        .contacts
-        .iter()
-        .map(|c| {
-            let (ga, gb) = (&model.geoms[c.geom_a], &model.geoms[c.geom_b]);
-            let (pa, pb) = (pose(ga.body), pose(gb.body));
-            let face = box_face_for_step(c, &model.geoms, (&pa, &pb), (&pa, &pb));
-            witness_frozen(c, &model.geoms, pose, face).0.phi
-        })
-        .collect()
+    signed_distances_at(model, pose).collect()
+}
+
+/// [`signed_distances`] at the body poses `pose(b)` (the world frame for body 0).
+pub(crate) fn signed_distances_at(
+    model: &crate::Model,
+    pose: impl Fn(usize) -> Pose + Copy,
+) -> impl Iterator<Item = f64> {
+    model.contacts.iter().map(move |c| {
+        let (ga, gb) = (&model.geoms[c.geom_a], &model.geoms[c.geom_b]);
+        let (pa, pb) = (pose(ga.body), pose(gb.body));
+        let face = box_face_for_step(c, &model.geoms, (&pa, &pb), (&pa, &pb));
+        witness_frozen(c, &model.geoms, pose, face).0.phi
+    })
 }
