@@ -163,3 +163,28 @@ def test_a_box_pushed_across_a_roller_rides_on_it(yaw, slab):
     least = min(ukemi.signed_distances(m, m.make_state(qpos=q)).min() for q in traj.qpos)
     assert least > -1e-8
     assert np.diff(np.asarray(traj.energy)).max() < 1e-3
+
+
+ACROSS = ('<geom type="cylinder" size="0.05 0.1" pos="0 0 0.1"/><body pos="0.01 0.005 0.3" '
+          'euler="90 0 0"><freejoint/><geom type="cylinder" size="0.04 0.2"/></body>')
+
+
+def test_a_cylinder_lying_across_an_upright_ones_cap_rests_on_both_ends_of_the_chord():
+    """A cylinder dropped across a standing cylinder's end disk touches its rim at the two ends of
+    a chord. With one point per rim, the point held for a step swapped between the chord's
+    ends at every check round: the lying cylinder rocked without coming to rest (0.05 m/s after
+    2 s, 11 iterations a step). Each rim's second local minimum is now a candidate of its own.
+    Measured 2026-12-05: it rests at 0.24 m (no overlap beyond 2e-12 m), 2.0 iterations a
+    step, moving at 6e-5 m/s after 2 s (a slow roll across the chord, along which it is in
+    neutral equilibrium: 1.8e-4 m/s after 10 s); MuJoCo 4.0.0 (one contact for the pair) still
+    rocks at 0.05 m/s after 2 s, 0.2 mm deep, and the cylinder falls off the post within 10 s."""
+    m = load(scene(ACROSS))
+    traj = ukemi.rollout(m, m.make_state(), nsteps=400)
+    assert set(traj.status.tolist()) <= {"converged", "acceptable"}
+    assert traj.min_distance.min() > -1e-8
+    # resting on the rim's chord: the lowest line at the cap's height, the axis level, no
+    # slide along it; rolling across the chord is neutral, and has not started
+    assert abs(traj.qpos[-1, 2] - 0.24) < 1e-8, traj.qpos[-1]
+    assert abs(traj.qpos[-1, 1] - 0.005) < 1e-6
+    assert np.abs(traj.qvel[-1]).max() < 1e-3, traj.qvel[-1]
+    assert traj.iterations[-100:].mean() < 4

@@ -21,7 +21,9 @@
 //!   [`RIM_SAMPLES`] angles brackets the minimiser, refined by the same search on `g'(θ)`. A disk
 //!   lying flat on a face has a flat `g`: the sampled angle is kept (and such a rim is frozen
 //!   for the step by the caller, as the disk–plane rim is, see
-//!   [`crate::contact::disk_rim_for_step`]).
+//!   [`crate::contact::disk_rim_for_step`]). A rim's *second* point (between two cylinders) is
+//!   `g`'s least local minimum outside the least one's basin of samples, refined the same way:
+//!   a disk under another cylinder's side touches it at a chord's two ends.
 
 use std::sync::Arc;
 
@@ -98,12 +100,19 @@ pub enum Core {
         /// Half the edge's length (m).
         half_length: f64,
     },
-    /// The rim of a cylinder's end disk at height `z` on the geom's z axis.
+    /// The rim of a cylinder's end disk at height `z` on the geom's z axis: its point nearest
+    /// the solid, or with `second` its other local minimum of the distance.
     Rim {
         /// Height of the disk's centre on the geom's z axis (m).
         z: f64,
         /// Radius of the disk (m).
         radius: f64,
+        /// The rim's second point: where the distance around the rim has a second local
+        /// minimum (a disk under a line-like support, another cylinder's side lying across
+        /// it, touches it at a chord's two ends), else the point opposite the nearest one.
+        /// Always held for the step (`nearest_rim` reports it flat): the minimum it follows
+        /// appears and vanishes as the poses change.
+        second: bool,
     },
 }
 
@@ -203,9 +212,13 @@ pub fn core_solid(
                 (rim_point(&centre, &axis(0), &axis(1), s.radius, theta), 0.0)
             }
         }
-        Core::Rim { z, radius } => {
+        Core::Rim { z, radius, second } => {
             let centre = origin + z * axis(2);
-            let theta = rim_minimiser(solid, &centre, &axis(0), &axis(1), radius);
+            let theta = if second {
+                rim_second_minimiser(solid, &centre, &axis(0), &axis(1), radius)
+            } else {
+                rim_minimiser(solid, &centre, &axis(0), &axis(1), radius)
+            };
             (rim_point(&centre, &axis(0), &axis(1), radius, theta), 0.0)
         }
         Core::Edge { .. } => {
@@ -240,7 +253,18 @@ pub fn nearest_rim(
     let origin = pose_solid.rot.transpose() * (pose_core.pos - pose_solid.pos);
     let axis = |k: usize| rot.column(k).into_owned();
     let (z, radius, rise) = match *core {
-        Core::Rim { z, radius } => (z, radius, f64::INFINITY),
+        Core::Rim {
+            z,
+            radius,
+            second: true,
+        } => {
+            let centre = origin + z * axis(2);
+            let theta = rim_second_minimiser(solid, &centre, &axis(0), &axis(1), radius);
+            let (s, c) = theta.sin_cos();
+            // (reported flat: always held)
+            return Some((Vector3::new(radius * c, radius * s, z), 0.0));
+        }
+        Core::Rim { z, radius, .. } => (z, radius, f64::INFINITY),
         Core::Side(s) | Core::Segment(s) => {
             let d = axis(2);
             let t = segment_minimiser(solid, &origin, &d, s.half_length);
@@ -369,17 +393,74 @@ fn rim_minimiser(
     v: &Vector3<f64>,
     r: f64,
 ) -> f64 {
+    let samples = rim_samples(solid, c, u, v, r);
+    refine_rim(solid, c, u, v, r, lowest(&samples, 0..RIM_SAMPLES))
+}
+
+/// The rim's distance at the [`RIM_SAMPLES`] angles `k τ / RIM_SAMPLES`.
+fn rim_samples(
+    solid: &Solid,
+    c: &Vector3<f64>,
+    u: &Vector3<f64>,
+    v: &Vector3<f64>,
+    r: f64,
+) -> [f64; RIM_SAMPLES] {
     let step = std::f64::consts::TAU / RIM_SAMPLES as f64;
-    let value = |theta: f64| solid.distance(&rim_point(c, u, v, r, theta)).0;
-    let mut best = (value(0.0), 0.0);
-    for k in 1..RIM_SAMPLES {
-        let theta = k as f64 * step;
-        let g = value(theta);
-        if g < best.0 {
-            best = (g, theta);
-        }
+    std::array::from_fn(|k| solid.distance(&rim_point(c, u, v, r, k as f64 * step)).0)
+}
+
+/// The index (mod [`RIM_SAMPLES`]) of the least sample among `range` (the first on ties).
+fn lowest(samples: &[f64; RIM_SAMPLES], range: std::ops::Range<usize>) -> usize {
+    range
+        .map(|k| k % RIM_SAMPLES)
+        .fold(None, |best: Option<usize>, k| match best {
+            Some(b) if samples[b] <= samples[k] => Some(b),
+            _ => Some(k),
+        })
+        .unwrap_or(0)
+}
+
+/// The angle of the rim's second local minimum of `sd` (see [`Core::Rim`]): the least sample
+/// outside the basin of the least one (the samples rising from it both ways), refined as
+/// [`rim_minimiser`] refines; the angle opposite the least sample where there is none (a
+/// distance with one minimum around the rim, or flat).
+fn rim_second_minimiser(
+    solid: &Solid,
+    c: &Vector3<f64>,
+    u: &Vector3<f64>,
+    v: &Vector3<f64>,
+    r: f64,
+) -> f64 {
+    const N: usize = RIM_SAMPLES;
+    let samples = rim_samples(solid, c, u, v, r);
+    let k0 = lowest(&samples, 0..N);
+    let at = |k: usize| samples[k % N];
+    // the basin's ends: the last samples reached rising (not falling) from k0 either way
+    let ahead = (1..N).take_while(|&i| at(k0 + i) >= at(k0 + i - 1)).count();
+    let behind = (1..N)
+        .take_while(|&i| at(k0 + N - i) >= at(k0 + N - i + 1))
+        .count();
+    // the samples strictly between the basin's ends, the other way round
+    let (first, last) = (k0 + ahead + 1, k0 + N - behind);
+    if first >= last {
+        let opposite = (k0 as f64 + 0.5 * N as f64) * std::f64::consts::TAU / N as f64;
+        return opposite;
     }
-    let theta0 = best.1;
+    refine_rim(solid, c, u, v, r, lowest(&samples, first..last))
+}
+
+/// The rim's local minimiser of `sd` near sample `k`, found by [`first_rise`] on `g'(θ)`
+/// between the sample's neighbours.
+fn refine_rim(
+    solid: &Solid,
+    c: &Vector3<f64>,
+    u: &Vector3<f64>,
+    v: &Vector3<f64>,
+    r: f64,
+    k: usize,
+) -> f64 {
+    let step = std::f64::consts::TAU / RIM_SAMPLES as f64;
+    let theta0 = k as f64 * step;
     // g'(θ) = n · r (−sin θ u + cos θ v)
     let slope = |theta: f64| {
         let (s, co) = theta.sin_cos();
@@ -441,6 +522,55 @@ mod tests {
         // a segment whose nearest point is its end
         let t = segment_minimiser(&solid, &Vector3::new(0.0, 3.0, 0.0), &Vector3::y(), 1.0);
         assert_eq!(t, -1.0);
+    }
+
+    #[test]
+    fn a_rim_under_a_lying_cylinder_has_its_second_point_at_the_other_chord_end() {
+        // a disk of radius 0.05 at z = 0 (its rim in the xy plane, centred at the origin) under
+        // a cylinder of radius 0.04 lying along y with its axis at x = 0.01, z = 0.05: the rim
+        // meets the lying cylinder's lowest line at the chord's ends, θ = ±acos(0.01 / 0.05)
+        let (r, x_axis) = (0.05, 0.01);
+        let solid = Solid::Cylinder {
+            radius: 0.04,
+            half_length: 0.3,
+        };
+        // the solid's frame: its axis along y, so the disk's frame in it is turned by 90° about x
+        let to_solid = |p: Vector3<f64>| Vector3::new(p.x - x_axis, -(p.z - 0.05), p.y);
+        let c = to_solid(Vector3::zeros());
+        let (u, v) = (to_solid(Vector3::x()) - c, to_solid(Vector3::y()) - c);
+        let end = (x_axis / r).acos();
+        let first = rim_minimiser(&solid, &c, &u, &v, r);
+        let second = rim_second_minimiser(&solid, &c, &u, &v, r);
+        let [a, b] = [first, second].map(|t| t.sin().atan2(t.cos()));
+        let (lo, hi) = (a.min(b), a.max(b));
+        assert!(
+            (lo + end).abs() < 1e-9 && (hi - end).abs() < 1e-9,
+            "{a} {b} vs ±{end}"
+        );
+        // both 1 cm below the lying cylinder's lowest line (z = 0.01)
+        for t in [first, second] {
+            let d = solid.distance(&rim_point(&c, &u, &v, r, t)).0;
+            assert!((d - 0.01).abs() < 1e-12, "{d}");
+        }
+    }
+
+    #[test]
+    fn a_rim_with_one_minimum_has_its_second_point_opposite() {
+        // tilted over a box (one minimum at −y) and flat on it (every point a minimum)
+        let solid = Solid::Box {
+            half_extents: Vector3::new(2.0, 2.0, 0.5),
+        };
+        let c = Vector3::new(0.1, 0.2, 1.0);
+        for tilt in [0.3f64, 0.0] {
+            let (u, v) = (Vector3::x(), Vector3::new(0.0, tilt.cos(), tilt.sin()));
+            let first = rim_minimiser(&solid, &c, &u, &v, 0.4);
+            let second = rim_second_minimiser(&solid, &c, &u, &v, 0.4);
+            let turn = (second - first).rem_euclid(std::f64::consts::TAU);
+            assert!(
+                (turn - std::f64::consts::PI).abs() < 1e-9,
+                "{tilt}: {first} {second}"
+            );
+        }
     }
 
     #[test]
