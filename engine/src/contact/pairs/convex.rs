@@ -207,19 +207,28 @@ pub fn core_solid(
                 (origin + t * axis(2), s.radius)
             } else {
                 // at an end of the axis: that end's rim
-                let centre = origin + t * axis(2);
-                let theta = rim_minimiser(solid, &centre, &axis(0), &axis(1), s.radius);
-                (rim_point(&centre, &axis(0), &axis(1), s.radius, theta), 0.0)
+                let rim = Circle {
+                    c: origin + t * axis(2),
+                    u: axis(0),
+                    v: axis(1),
+                    r: s.radius,
+                };
+                (rim.point(rim.minimiser(solid)), 0.0)
             }
         }
         Core::Rim { z, radius, second } => {
-            let centre = origin + z * axis(2);
-            let theta = if second {
-                rim_second_minimiser(solid, &centre, &axis(0), &axis(1), radius)
-            } else {
-                rim_minimiser(solid, &centre, &axis(0), &axis(1), radius)
+            let rim = Circle {
+                c: origin + z * axis(2),
+                u: axis(0),
+                v: axis(1),
+                r: radius,
             };
-            (rim_point(&centre, &axis(0), &axis(1), radius, theta), 0.0)
+            let theta = if second {
+                rim.second_minimiser(solid)
+            } else {
+                rim.minimiser(solid)
+            };
+            (rim.point(theta), 0.0)
         }
         Core::Edge { .. } => {
             let (c, d, half) = core.edge_in(&rot, &origin);
@@ -258,9 +267,13 @@ pub fn nearest_rim(
             radius,
             second: true,
         } => {
-            let centre = origin + z * axis(2);
-            let theta = rim_second_minimiser(solid, &centre, &axis(0), &axis(1), radius);
-            let (s, c) = theta.sin_cos();
+            let rim = Circle {
+                c: origin + z * axis(2),
+                u: axis(0),
+                v: axis(1),
+                r: radius,
+            };
+            let (s, c) = rim.second_minimiser(solid).sin_cos();
             // (reported flat: always held)
             return Some((Vector3::new(radius * c, radius * s, z), 0.0));
         }
@@ -285,9 +298,14 @@ pub fn nearest_rim(
         }
         Core::Ball(_) => return None,
     };
-    let centre = origin + z * axis(2);
-    let theta = rim_minimiser(solid, &centre, &axis(0), &axis(1), radius);
-    let q = rim_point(&centre, &axis(0), &axis(1), radius, theta);
+    let rim = Circle {
+        c: origin + z * axis(2),
+        u: axis(0),
+        v: axis(1),
+        r: radius,
+    };
+    let theta = rim.minimiser(solid);
+    let q = rim.point(theta);
     let normal = solid.distance(&q).2;
     let sine = normal.cross(&axis(2)).norm();
     let (s, c) = theta.sin_cos();
@@ -306,18 +324,6 @@ fn slowest_rise(solid: &Solid, c: &Vector3<f64>, d: &Vector3<f64>, half: f64, t:
         .map(|x| (g(x) - g(t)) / reach)
         .fold(f64::INFINITY, f64::min)
         .max(0.0)
-}
-
-/// `c + r (cos θ u + sin θ v)`.
-fn rim_point(
-    c: &Vector3<f64>,
-    u: &Vector3<f64>,
-    v: &Vector3<f64>,
-    r: f64,
-    theta: f64,
-) -> Vector3<f64> {
-    let (s, co) = theta.sin_cos();
-    c + r * (co * u + s * v)
 }
 
 /// The smallest `x ∈ (0, hi]` with `rising(x)` true, given `rising(0)` false and `rising(hi)`
@@ -383,30 +389,80 @@ fn segment_minimiser(solid: &Solid, c: &Vector3<f64>, d: &Vector3<f64>, half: f6
     dir * first_rise(|t| dir * slope(dir * t), FLAT_SLOPE, half)
 }
 
-/// The angle minimising `sd` over the rim `c + r (cos θ u + sin θ v)`: the best of
-/// [`RIM_SAMPLES`] angles (the first on ties), refined by [`first_rise`] on `g'(θ)` between its
-/// neighbours.
-fn rim_minimiser(
-    solid: &Solid,
-    c: &Vector3<f64>,
-    u: &Vector3<f64>,
-    v: &Vector3<f64>,
+/// A rim: the circle `c + r (cos θ u + sin θ v)` (`u`, `v` orthonormal), in a solid's frame.
+struct Circle {
+    c: Vector3<f64>,
+    u: Vector3<f64>,
+    v: Vector3<f64>,
     r: f64,
-) -> f64 {
-    let samples = rim_samples(solid, c, u, v, r);
-    refine_rim(solid, c, u, v, r, lowest(&samples, 0..RIM_SAMPLES))
 }
 
-/// The rim's distance at the [`RIM_SAMPLES`] angles `k τ / RIM_SAMPLES`.
-fn rim_samples(
-    solid: &Solid,
-    c: &Vector3<f64>,
-    u: &Vector3<f64>,
-    v: &Vector3<f64>,
-    r: f64,
-) -> [f64; RIM_SAMPLES] {
-    let step = std::f64::consts::TAU / RIM_SAMPLES as f64;
-    std::array::from_fn(|k| solid.distance(&rim_point(c, u, v, r, k as f64 * step)).0)
+impl Circle {
+    /// The point at angle `θ`.
+    fn point(&self, theta: f64) -> Vector3<f64> {
+        let (s, co) = theta.sin_cos();
+        self.c + self.r * (co * self.u + s * self.v)
+    }
+
+    /// The angle minimising `sd` over the circle: the best of [`RIM_SAMPLES`] angles (the first
+    /// on ties), refined by [`first_rise`] on `g'(θ)` between its neighbours.
+    fn minimiser(&self, solid: &Solid) -> f64 {
+        let samples = self.samples(solid);
+        self.refine(solid, lowest(&samples, 0..RIM_SAMPLES))
+    }
+
+    /// The angle of the circle's second local minimum of `sd` (see [`Core::Rim`]): the least
+    /// sample outside the basin of the least one (the samples rising from it both ways),
+    /// refined as [`Self::minimiser`] refines; the angle opposite the least sample where there
+    /// is none (a distance with one minimum around the circle, or flat).
+    fn second_minimiser(&self, solid: &Solid) -> f64 {
+        const N: usize = RIM_SAMPLES;
+        let samples = self.samples(solid);
+        let k0 = lowest(&samples, 0..N);
+        let at = |k: usize| samples[k % N];
+        // the basin's ends: the last samples reached rising (not falling) from k0 either way
+        let ahead = (1..N).take_while(|&i| at(k0 + i) >= at(k0 + i - 1)).count();
+        let behind = (1..N)
+            .take_while(|&i| at(k0 + N - i) >= at(k0 + N - i + 1))
+            .count();
+        // the samples strictly between the basin's ends, the other way round
+        let (first, last) = (k0 + ahead + 1, k0 + N - behind);
+        if first >= last {
+            return (k0 as f64 + 0.5 * N as f64) * std::f64::consts::TAU / N as f64;
+        }
+        self.refine(solid, lowest(&samples, first..last))
+    }
+
+    /// `sd` at the [`RIM_SAMPLES`] angles `k τ / RIM_SAMPLES`.
+    fn samples(&self, solid: &Solid) -> [f64; RIM_SAMPLES] {
+        let step = std::f64::consts::TAU / RIM_SAMPLES as f64;
+        std::array::from_fn(|k| solid.distance(&self.point(k as f64 * step)).0)
+    }
+
+    /// The local minimiser of `sd` near sample `k`, found by [`first_rise`] on `g'(θ)`
+    /// between the sample's neighbours.
+    fn refine(&self, solid: &Solid, k: usize) -> f64 {
+        let (u, v, r) = (&self.u, &self.v, self.r);
+        let step = std::f64::consts::TAU / RIM_SAMPLES as f64;
+        let theta0 = k as f64 * step;
+        // g'(θ) = n · r (−sin θ u + cos θ v)
+        let slope = |theta: f64| {
+            let (s, co) = theta.sin_cos();
+            let n = solid.distance(&self.point(theta)).2;
+            r * n.dot(&(co * v - s * u))
+        };
+        let s0 = slope(theta0);
+        if s0.abs() <= FLAT_SLOPE * r.max(1.0) {
+            return theta0;
+        }
+        let dir = if s0 < 0.0 { 1.0 } else { -1.0 };
+        let rising = |a: f64| dir * slope(theta0 + dir * a) >= -FLAT_SLOPE * r.max(1.0);
+        if !rising(step) {
+            return theta0 + dir * step; // (not unimodal in the bracket: its end)
+        }
+        let tol = FLAT_SLOPE * r.max(1.0);
+        theta0 + dir * first_rise(|a| dir * slope(theta0 + dir * a), tol, step)
+    }
 }
 
 /// The index (mod [`RIM_SAMPLES`]) of the least sample among `range` (the first on ties).
@@ -418,66 +474,6 @@ fn lowest(samples: &[f64; RIM_SAMPLES], range: std::ops::Range<usize>) -> usize 
             _ => Some(k),
         })
         .unwrap_or(0)
-}
-
-/// The angle of the rim's second local minimum of `sd` (see [`Core::Rim`]): the least sample
-/// outside the basin of the least one (the samples rising from it both ways), refined as
-/// [`rim_minimiser`] refines; the angle opposite the least sample where there is none (a
-/// distance with one minimum around the rim, or flat).
-fn rim_second_minimiser(
-    solid: &Solid,
-    c: &Vector3<f64>,
-    u: &Vector3<f64>,
-    v: &Vector3<f64>,
-    r: f64,
-) -> f64 {
-    const N: usize = RIM_SAMPLES;
-    let samples = rim_samples(solid, c, u, v, r);
-    let k0 = lowest(&samples, 0..N);
-    let at = |k: usize| samples[k % N];
-    // the basin's ends: the last samples reached rising (not falling) from k0 either way
-    let ahead = (1..N).take_while(|&i| at(k0 + i) >= at(k0 + i - 1)).count();
-    let behind = (1..N)
-        .take_while(|&i| at(k0 + N - i) >= at(k0 + N - i + 1))
-        .count();
-    // the samples strictly between the basin's ends, the other way round
-    let (first, last) = (k0 + ahead + 1, k0 + N - behind);
-    if first >= last {
-        let opposite = (k0 as f64 + 0.5 * N as f64) * std::f64::consts::TAU / N as f64;
-        return opposite;
-    }
-    refine_rim(solid, c, u, v, r, lowest(&samples, first..last))
-}
-
-/// The rim's local minimiser of `sd` near sample `k`, found by [`first_rise`] on `g'(θ)`
-/// between the sample's neighbours.
-fn refine_rim(
-    solid: &Solid,
-    c: &Vector3<f64>,
-    u: &Vector3<f64>,
-    v: &Vector3<f64>,
-    r: f64,
-    k: usize,
-) -> f64 {
-    let step = std::f64::consts::TAU / RIM_SAMPLES as f64;
-    let theta0 = k as f64 * step;
-    // g'(θ) = n · r (−sin θ u + cos θ v)
-    let slope = |theta: f64| {
-        let (s, co) = theta.sin_cos();
-        let n = solid.distance(&rim_point(c, u, v, r, theta)).2;
-        r * n.dot(&(co * v - s * u))
-    };
-    let s0 = slope(theta0);
-    if s0.abs() <= FLAT_SLOPE * r.max(1.0) {
-        return theta0;
-    }
-    let dir = if s0 < 0.0 { 1.0 } else { -1.0 };
-    let rising = |a: f64| dir * slope(theta0 + dir * a) >= -FLAT_SLOPE * r.max(1.0);
-    if !rising(step) {
-        return theta0 + dir * step; // (not unimodal in the bracket: its end)
-    }
-    let tol = FLAT_SLOPE * r.max(1.0);
-    theta0 + dir * first_rise(|a| dir * slope(theta0 + dir * a), tol, step)
 }
 
 #[cfg(test)]
@@ -539,8 +535,8 @@ mod tests {
         let c = to_solid(Vector3::zeros());
         let (u, v) = (to_solid(Vector3::x()) - c, to_solid(Vector3::y()) - c);
         let end = (x_axis / r).acos();
-        let first = rim_minimiser(&solid, &c, &u, &v, r);
-        let second = rim_second_minimiser(&solid, &c, &u, &v, r);
+        let rim = Circle { c, u, v, r };
+        let (first, second) = (rim.minimiser(&solid), rim.second_minimiser(&solid));
         let [a, b] = [first, second].map(|t| t.sin().atan2(t.cos()));
         let (lo, hi) = (a.min(b), a.max(b));
         assert!(
@@ -549,7 +545,7 @@ mod tests {
         );
         // both 1 cm below the lying cylinder's lowest line (z = 0.01)
         for t in [first, second] {
-            let d = solid.distance(&rim_point(&c, &u, &v, r, t)).0;
+            let d = solid.distance(&rim.point(t)).0;
             assert!((d - 0.01).abs() < 1e-12, "{d}");
         }
     }
@@ -563,8 +559,8 @@ mod tests {
         let c = Vector3::new(0.1, 0.2, 1.0);
         for tilt in [0.3f64, 0.0] {
             let (u, v) = (Vector3::x(), Vector3::new(0.0, tilt.cos(), tilt.sin()));
-            let first = rim_minimiser(&solid, &c, &u, &v, 0.4);
-            let second = rim_second_minimiser(&solid, &c, &u, &v, 0.4);
+            let rim = Circle { c, u, v, r: 0.4 };
+            let (first, second) = (rim.minimiser(&solid), rim.second_minimiser(&solid));
             let turn = (second - first).rem_euclid(std::f64::consts::TAU);
             assert!(
                 (turn - std::f64::consts::PI).abs() < 1e-9,
@@ -582,8 +578,9 @@ mod tests {
         let tilt = 0.3f64;
         let (u, v) = (Vector3::x(), Vector3::new(0.0, tilt.cos(), tilt.sin()));
         let c = Vector3::new(0.1, 0.2, 1.0);
-        let theta = rim_minimiser(&solid, &c, &u, &v, 0.4);
-        let p = rim_point(&c, &u, &v, 0.4, theta);
+        let rim = Circle { c, u, v, r: 0.4 };
+        let theta = rim.minimiser(&solid);
+        let p = rim.point(theta);
         assert!((p.z - (1.0 - 0.4 * tilt.sin())).abs() < 1e-14, "{p:?}");
         assert!((theta - 1.5 * std::f64::consts::PI).abs() < 1e-9, "{theta}");
     }
