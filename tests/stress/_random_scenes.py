@@ -10,6 +10,7 @@ import numpy as np
 
 import ukemi
 
+from ._overlap import Polytope
 from ._util import add_free, floor_builder
 
 SHAPES = ("sphere", "box", "capsule", "cylinder", "ellipsoid")
@@ -147,7 +148,14 @@ def random_box_pile(seed: int):
     """(model, description) of box pile ``seed``: 3-6 free boxes of random sizes, masses and
     orientations dropped one above the other within a 0.3 m square, so that they land on each
     other corner, edge or face first (the box pairs' corners and edge crossings)."""
+    m, desc, _ = box_pile_with_solids(seed)
+    return m, desc
+
+
+def box_pile_with_solids(seed: int):
+    """:func:`random_box_pile` and its boxes as ``_overlap.Polytope`` s."""
     rng = np.random.default_rng([seed, 3])
+    solids = []
     b = floor_builder(friction=float(rng.uniform(0.2, 1.0)))
     nbody = int(rng.integers(3, 7))
     for i in range(nbody):
@@ -156,14 +164,22 @@ def random_box_pile(seed: int):
         pos = (float(rng.uniform(-0.15, 0.15)), float(rng.uniform(-0.15, 0.15)), 0.3 + 0.3 * i)
         add_free(b, f"b{i}", "box", size, mass, inertia("box", size, mass), pos,
                  tuple(_quat(rng)), friction=float(rng.uniform(0.2, 1.0)))
-    return b.compile(), f"pile of {nbody} boxes"
+        solids.append(Polytope.box(i + 1, size))
+    return b.compile(), f"pile of {nbody} boxes", solids
 
 
 def random_hull_pile(seed: int):
     """(model, description) of hull pile ``seed``: 3-5 free meshes (the convex hulls of 6-10
     random points, a few centimetres across) dropped one above the other, so that they land on
     each other vertex, edge or face first (the hull pairs' vertices and edge crossings)."""
+    m, desc, _ = hull_pile_with_solids(seed)
+    return m, desc
+
+
+def hull_pile_with_solids(seed: int):
+    """:func:`random_hull_pile` and its hulls as ``_overlap.Polytope`` s."""
     rng = np.random.default_rng([seed, 4])
+    solids = []
     b = floor_builder(friction=float(rng.uniform(0.2, 1.0)))
     nbody = int(rng.integers(3, 6))
     for i in range(nbody):
@@ -175,7 +191,8 @@ def random_hull_pile(seed: int):
         b.add_joint(f"b{i}_free", "free", "world", f"b{i}")
         b.add_geom(f"b{i}", f"b{i}", "mesh", vertices=points.tolist(),
                    friction=float(rng.uniform(0.2, 1.0)))
-    return b.compile(), f"pile of {nbody} hulls"
+        solids.append(Polytope(i + 1, points))
+    return b.compile(), f"pile of {nbody} hulls", solids
 
 
 def random_pile(seed: int):

@@ -29,13 +29,15 @@ def failure_summary(traj) -> str:
     return f"{int(bad.sum())}/{len(bad)} unconverged {kinds}, first at step {int(np.argmax(bad))}"
 
 
-def violations(model, traj, energy_gain: float = 1e-4, work=None) -> list[str]:
+def violations(model, traj, energy_gain: float = 1e-4, work=None, overlap=None) -> list[str]:
     """What breaks the stress contract: solver failures, NaN, penetration below -1e-8 m, energy
     growth. Empty when the run is stable.
 
     Contacts are inelastic, friction and dampers dissipate, so the discrete energy may rise above
     its initial value plus the actuators' work ``work`` (T+1,) (zero when None) only by
-    ``energy_gain`` relative to max(1 J, |E0|).
+    ``energy_gain`` relative to max(1 J, |E0|). ``overlap``: the deepest overlap of the scene's
+    polytopes by the separating-axis test and its state (``_overlap.deepest_overlap``), which
+    sees what no contact candidate does.
     """
     out = []
     if not traj.converged:
@@ -45,6 +47,8 @@ def violations(model, traj, energy_gain: float = 1e-4, work=None) -> list[str]:
     least = float(traj.min_distance.min())
     if least < PENETRATION_TOL:
         out.append(f"penetration {least:.1e} m at state {int(traj.min_distance.argmin())}")
+    if overlap is not None and overlap[0] < PENETRATION_TOL:
+        out.append(f"solids overlap {overlap[0]:.1e} m at state {overlap[1]}")
     energy = traj.energy
     if work is not None:
         energy = energy - work
@@ -55,9 +59,9 @@ def violations(model, traj, energy_gain: float = 1e-4, work=None) -> list[str]:
 
 
 def assert_stable(model, traj, energy_gain: float = 1e-4, converged: bool = True,
-                  work=None) -> None:
+                  work=None, overlap=None) -> None:
     """Assert :func:`violations` finds nothing (solver failures ignored if not ``converged``)."""
-    found = violations(model, traj, energy_gain, work)
+    found = violations(model, traj, energy_gain, work, overlap)
     if not converged and not traj.converged:
         found = found[1:]
     assert not found, "; ".join(found)

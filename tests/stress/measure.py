@@ -37,8 +37,8 @@ def random_scenes(n: int, log) -> dict[int, str]:
 def piles(n: int, log, run=test_random_scenes.pile, name="pile") -> dict[int, str]:
     found = {}
     for seed in range(n):
-        m, desc, tr = run(seed, nsteps=300)
-        bad = violations(m, tr, energy_gain=1e-4)
+        m, desc, tr, *overlap = run(seed, nsteps=300)
+        bad = violations(m, tr, energy_gain=1e-4, overlap=overlap[0] if overlap else None)
         if bad:
             found[seed] = f"{desc}: {'; '.join(bad)}"
             log(f"{name} {seed}: {found[seed]}")

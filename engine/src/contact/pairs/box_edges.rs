@@ -28,7 +28,10 @@
 //! The same for a box or a mesh's hull against another ([`polytope_crossings`],
 //! [`super::Feature::EdgeCrossing`]: every pair of edges, an edge supporting its solid where
 //! the normal lies in the cone of its two faces' normals and points into the solid at the
-//! edge; crossed through, the two edge points must lie in each other's solids), and for a
+//! edge; crossed through, the two edge points must lie in each other's solids; and measured
+//! against the two solids' separation by the separating-axis test: a crossed crossing more
+//! than twice as deep as their overlap is left out, the one along which they part or overlap
+//! least kept whatever the other tests say), and for a
 //! capsule's segment against a box's or hull's edges ([`capsule_crossings`],
 //! [`super::Feature::CapsuleEdge`]: two slots, the distance less the capsule's radius).
 
@@ -575,6 +578,29 @@ impl Polytope<'_> {
         }
     }
 
+    /// The largest `u · x` over the solid (world unit `u`).
+    fn reach(&self, pose: &GeomPose, u: &Vector3<f64>) -> f64 {
+        let local = pose.rot.transpose() * u;
+        u.dot(&pose.pos)
+            + match self {
+                Polytope::Box(half) => local.abs().dot(half),
+                Polytope::Hull(h) => h.support(&local),
+            }
+    }
+
+    /// Its outward face normals, in the world.
+    fn face_normals<'s>(
+        &'s self,
+        pose: &'s GeomPose,
+    ) -> Box<dyn Iterator<Item = Vector3<f64>> + 's> {
+        match self {
+            Polytope::Box(_) => Box::new(
+                (0..6).map(move |k| pose.rot.column(k % 3) * if k < 3 { 1.0 } else { -1.0 }),
+            ),
+            Polytope::Hull(h) => Box::new(h.planes().map(move |(n, _)| pose.rot * n)),
+        }
+    }
+
     /// Radius of a sphere about the geom origin that holds it.
     fn radius(&self) -> f64 {
         match self {
@@ -583,6 +609,14 @@ impl Polytope<'_> {
         }
     }
 }
+
+/// How much deeper than the solids' overlap (m; or, beyond that, than twice it) a crossed
+/// crossing may be and still be theirs ([`polytope_crossings`]).
+const SAT_SLACK: f64 = 1e-6;
+
+/// Relative tolerance on a crossing's distance being the solids' separation (the crossing
+/// along which they part or overlap least, [`polytope_crossings`]).
+const AXIS_TOL: f64 = 1e-6;
 
 /// Whether the unit `u` (normal to the edge) lies in the cone of the edge's two face normals,
 /// within [`TIE`]: the edge then supports its solid along `u`.
@@ -598,10 +632,36 @@ fn supports(edge: &HullEdge, u: &Vector3<f64>) -> bool {
     alpha >= -TIE && beta >= -TIE
 }
 
+/// The largest separation of A from B over the separating-axis test's axes, every face normal
+/// of either and every pair of their edges (world `edges_a`, `edges_b`); negative: the solids
+/// overlap by that much (the least translation that parts them).
+fn separation(
+    (a, pose_a, edges_a): (Polytope<'_>, &GeomPose, &[HullEdge]),
+    (b, pose_b, edges_b): (Polytope<'_>, &GeomPose, &[HullEdge]),
+    centres: &Vector3<f64>,
+) -> f64 {
+    // A on the +u side of B: min over A of u · x less the max over B
+    let sep = |u: Vector3<f64>| -a.reach(pose_a, &-u) - b.reach(pose_b, &u);
+    let from_a = a.face_normals(pose_a).map(|f| sep(-f));
+    let from_b = b.face_normals(pose_b).map(sep);
+    let edges = edges_a.iter().flat_map(|x| {
+        edges_b.iter().filter_map(move |y| {
+            let (n, _) = common_normal(&x.direction, &y.direction, centres)?;
+            Some(sep(n).max(sep(-n)))
+        })
+    });
+    from_a
+        .chain(from_b)
+        .chain(edges)
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
 /// The edge crossings of two polytopes (a box and a hull, or two hulls) at these poses: as
 /// [`crossings`], over every pair of their edges, an edge supporting its solid along the
-/// crossing's normal where that normal lies in the cone of its two faces' normals. None when
-/// the pair has more than [`MAX_EDGE_PAIRS`] edge pairs.
+/// crossing's normal where that normal lies in the cone of its two faces' normals; a crossed
+/// one no more than twice as deep as the solids' overlap (by the separating-axis test), and
+/// the one along which they part or overlap least kept whatever the other tests say. None
+/// when the pair has more than [`MAX_EDGE_PAIRS`] edge pairs.
 pub fn polytope_crossings(
     a: Polytope<'_>,
     pose_a: &GeomPose,
@@ -616,10 +676,14 @@ pub fn polytope_crossings(
     let edges_b: Vec<HullEdge> = (0..b.edge_count())
         .map(|e| b.world_edge(pose_b, e))
         .collect();
+    let edges_a: Vec<HullEdge> = (0..a.edge_count())
+        .map(|e| a.world_edge(pose_a, e))
+        .collect();
     let centres = a.interior(pose_a) - b.interior(pose_b);
     let mut found = Vec::new();
-    for ea in 0..a.edge_count() {
-        let x = a.world_edge(pose_a, ea);
+    let mut overlap: Option<f64> = None;
+    let tol = 1e-9 * (a.radius() + b.radius());
+    for (ea, x) in edges_a.iter().enumerate() {
         for (eb, y) in edges_b.iter().enumerate() {
             let Some((n, sign)) = common_normal(&x.direction, &y.direction, &centres) else {
                 continue;
@@ -629,7 +693,7 @@ pub fn polytope_crossings(
             // faces' tangent planes: there an edge point moved along the normal leaves the
             // solid, and a negative distance says nothing of overlap)
             let into = |e: &HullEdge, u: &Vector3<f64>| e.faces.iter().all(|f| f.dot(u) >= -TIE);
-            if !supports(&x, &-n) || !supports(y, &n) || !into(&x, &-n) || !into(y, &n) {
+            if !supports(x, &-n) || !supports(y, &n) {
                 continue;
             }
             let (s, t) = line_params((&x.centre, &x.direction), (&y.centre, &y.direction));
@@ -638,6 +702,7 @@ pub fn polytope_crossings(
             if !inside {
                 continue;
             }
+            // (each edge supports its solid: φ is the solids' separation along n)
             let phi = n.dot(&(x.centre - y.centre));
             let deepest = -a
                 .half_thickness(pose_a, &n)
@@ -645,7 +710,25 @@ pub fn polytope_crossings(
             // crossed through, the two edge points must lie in each other's solids
             let (pa, pb) = (x.centre + s * x.direction, y.centre + t * y.direction);
             let overlapping = phi >= 0.0 || (b.contains(pose_b, &pa) && a.contains(pose_a, &pb));
-            if phi > deepest && overlapping {
+            let plain = into(x, &-n) && into(y, &n) && phi > deepest && overlapping;
+            // Measured against the solids' separation by the separating-axis test (session
+            // 44): random hulls crossed like an X overlap deep along some edge pairs' normals,
+            // and one 5.3 cm deep was held where the solids overlapped by 2.5 cm (random hull
+            // pile 116: its impulse 4.4 N s, the energy 13 J → 36 J in a step), so a crossed
+            // crossing more than twice as deep as the overlap is not theirs. And the crossing
+            // along which they part or overlap least is theirs even where the tests above
+            // leave it out: at a sharp edge they did, and 209 of 250 random hull piles ended
+            // with two hulls sunk into each other by up to 9.5 cm, no candidate below zero.
+            let kept = if phi >= 0.0 && plain {
+                true
+            } else {
+                let least = *overlap.get_or_insert_with(|| {
+                    separation((a, pose_a, &edges_a), (b, pose_b, &edges_b), &centres)
+                });
+                let axis = (phi - least).abs() <= tol + AXIS_TOL * least.abs();
+                axis || (phi < 0.0 && plain && phi >= least - SAT_SLACK.max(least.abs()))
+            };
+            if kept {
                 found.push(Crossing {
                     a: ea as u8,
                     b: eb as u8,
@@ -820,7 +903,9 @@ mod tests {
     #[test]
     fn the_polytope_search_finds_the_box_search_crossings() {
         // random poses of two boxes near each other: the generic search over every edge pair
-        // (as for hulls) finds the crossings the boxes' own search finds
+        // (as for hulls) finds the crossings the boxes' own search finds, and besides them only
+        // the crossing along which the two overlap least (the separating-axis test's), which
+        // the boxes' search leaves out where it is deeper than a box's half thickness
         let mut rng = crate::solver::test_rng::Rng(5);
         let (ha, hb) = (
             Vector3::new(0.1, 0.07, 0.05),
@@ -834,18 +919,41 @@ mod tests {
             let pa = pose(r(&mut rng, 0.12), r(&mut rng, 3.0));
             let pb = pose([0.0; 3], r(&mut rng, 3.0));
             let boxes = crossings(&ha, &pa, &hb, &pb);
-            let generic = polytope_crossings(Polytope::Box(&ha), &pa, Polytope::Box(&hb), &pb);
-            for k in 0..EDGE_SLOTS {
-                match (boxes.slot(k), generic.slot(k)) {
-                    (Some(x), Some(y)) => {
-                        assert_eq!((x.a, x.b, x.sign), (y.a, y.b, y.sign));
-                        assert!((x.phi - y.phi).abs() < 1e-12);
-                        seen += 1;
-                    }
-                    (None, None) => {}
-                    other => panic!("slot {k}: {other:?}"),
+            let (a, b) = (Polytope::Box(&ha), Polytope::Box(&hb));
+            let generic = polytope_crossings(a, &pa, b, &pb);
+            let listed = |c: &Crossings| {
+                (0..EDGE_SLOTS)
+                    .filter_map(|k| c.slot(k))
+                    .collect::<Vec<_>>()
+            };
+            let (boxes, generic) = (listed(&boxes), listed(&generic));
+            let same = |x: &Crossing, y: &Crossing| {
+                (x.a, x.b, x.sign) == (y.a, y.b, y.sign) && (x.phi - y.phi).abs() < 1e-12
+            };
+            let edges = |p: Polytope<'_>, pose: &GeomPose| {
+                (0..12).map(|e| p.world_edge(pose, e)).collect::<Vec<_>>()
+            };
+            let least = separation(
+                (a, &pa, &edges(a, &pa)),
+                (b, &pb, &edges(b, &pb)),
+                &(pa.pos - pb.pos),
+            );
+            for y in &generic {
+                if boxes.iter().any(|x| same(x, y)) {
+                    seen += 1;
+                } else {
+                    assert!((y.phi - least).abs() < 1e-9, "{y:?} vs {least}");
                 }
             }
+            // a box crossing is left out only where it is more than twice as deep as the
+            // overlap (not the boxes' contact), or where the extra one took its slot
+            let deep = |x: &Crossing| x.phi < least - SAT_SLACK.max(least.abs());
+            let missing = boxes.iter().filter(|x| !generic.iter().any(|y| same(x, y)));
+            let displaced = missing.filter(|x| !deep(x)).count();
+            assert!(
+                displaced == 0 || generic.len() == EDGE_SLOTS,
+                "{boxes:?} {generic:?}"
+            );
         }
         assert!(seen > 100, "{seen}");
     }
