@@ -205,3 +205,21 @@ def test_mesh_cubes_turned_on_each_other_rest_on_their_edge_crossings(lower, upp
       <body pos="0 0 0.305" euler="0 0 30"><freejoint/>{geom[upper]}</body>
     </worldbody></mujoco>"""
     assert_rests(xml, 150, 9, 0.3)
+
+
+def test_hulls_resting_edge_on_edge_do_not_sink_into_each_other():
+    """Random hull pile 116 (``tests/stress``): two hulls of random points come to rest edge on
+    edge at a sharp edge. Its crossing failed the crossing search's tests (the normal must point
+    into each solid at its edge), so the hulls sank into each other (1.0, then 2.5 cm by the
+    separating-axis test) with every candidate's distance ≥ 0, until a crossing 5.3 cm deep
+    along another edge pair pushed them apart: 13 J → 36 J in one step. The crossing along which
+    the two overlap least is now kept, and crossed ones much deeper than the overlap are not."""
+    from stress._overlap import deepest_overlap
+    from stress._random_scenes import hull_pile_with_solids
+
+    m, _, solids = hull_pile_with_solids(116)
+    tr = ukemi.rollout(m, m.make_state(), nsteps=60)
+    least, state = deepest_overlap(tr, solids)
+    assert least > -1e-8, (least, state)
+    assert tr.min_distance.min() > -1e-8
+    assert np.max(tr.energy - tr.energy[0]) < 1e-4 * abs(tr.energy[0])
