@@ -2,7 +2,8 @@
 //! controls uniform in the control range, the same generator as `gradient_phases`):
 //! `cargo run --release -p ukemi-engine --example step_bench -- MODEL.xml [STEPS] [REPEATS] [SEED]`
 //! (SEED: another control sequence than the default one; `UKEMI_SLOWEST=N` lists the N slowest
-//! steps).
+//! steps; `UKEMI_DUMP=1` prints every body's final position, quaternion and velocities, to see
+//! how far two builds' trajectories drift apart).
 //! Prints the best-of-`REPEATS` ms/step, the IPM iterations per step (mean, median, max, and
 //! the mean with each step capped at 100, which the rare stalled steps do not dominate), the
 //! share of the run's time spent in its slowest 1% of steps, the
@@ -65,6 +66,16 @@ fn main() {
         let mut print = 0u64;
         for b in 1..model.nbody() {
             let p = state.pose(b);
+            if std::env::var("UKEMI_DUMP").is_ok() {
+                let (v, w) = state.velocity(b);
+                println!(
+                    "dump {b} {:?} {:?} {:?} {:?}",
+                    p.pos.as_slice(),
+                    p.quat.coords.as_slice(),
+                    v.as_slice(),
+                    w.as_slice()
+                );
+            }
             let (v, w) = state.velocity(b);
             for x in p.pos.iter().chain(p.quat.coords.iter()).chain(&v).chain(&w) {
                 print = print.rotate_left(5) ^ x.to_bits();

@@ -31,39 +31,48 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     let mut memo = crate::contact::BoxPairMemo::default();
     let mut poses = std::mem::take(&mut ws.geom_poses);
     let mut posed = false;
-    // (a mesh or cylinder pair's lower bound, for the pair's run of candidates)
-    let mut pair_gap: Option<((usize, usize), f64)> = None;
-    for (c, contact) in model.contacts.iter().enumerate() {
+    let n = model.ncontact();
+    let mut run = 0..0;
+    while run.end < n {
+        // a geom pair's run of candidates shares its margin and the lower bounds on its
+        // distance and closing speed, computed once for the run
+        run = run.end..pair_run_end(model, run.end);
+        let contact = &model.contacts[run.start];
         let margin = candidate_margin(model, contact);
-        if !ws.active[c] && margin.is_finite() {
-            let (a, b) = (
-                &ws.geom_bounds[contact.geom_a],
-                &ws.geom_bounds[contact.geom_b],
-            );
+        let skip = margin.is_finite() && run.clone().any(|c| !ws.active[c]) && {
             let key = (contact.geom_a, contact.geom_b);
-            let gap = match pair_gap {
-                Some((k, g)) if k == key => g,
-                _ => {
-                    let g = a.gap(b).max(convex_pair_gap(model, key, a, b));
-                    pair_gap = Some((key, g));
-                    g
+            let (a, b) = (&ws.geom_bounds[key.0], &ws.geom_bounds[key.1]);
+            let gap = a.gap(b).max(convex_pair_gap(model, key, a, b));
+            let mut speed = a.speed + b.speed;
+            // (two geoms moving together, such as a gripper's finger pads, close at their
+            // relative speed; needed only where the speeds do not suffice)
+            if gap <= margin + 2.0 * h * speed + drift {
+                let (ga, gb) = (&model.geoms[key.0], &model.geoms[key.1]);
+                speed = speed.min(relative_speed(state, ga, gb));
+            }
+            gap > margin + 2.0 * h * speed + drift && {
+                for c in run.clone().filter(|&c| !ws.active[c]) {
+                    ws.prepared[c] = false;
+                    ws.frozen[c] = None;
+                    ws.contact_phi_now[c] = gap;
+                    ws.contact_rate_now[c] = 0.0;
                 }
-            };
-            if gap > margin + 2.0 * h * (a.speed + b.speed) + drift {
-                ws.prepared[c] = false;
-                ws.frozen[c] = None;
-                ws.contact_phi_now[c] = gap;
-                ws.contact_rate_now[c] = 0.0;
+                true
+            }
+        };
+        for c in run.clone() {
+            if skip && !ws.active[c] {
                 continue;
             }
+            if !posed {
+                GeomPoses::fill(model, state, &ws.geom_bounds, &mut poses);
+                posed = true;
+            }
+            let contact = &model.contacts[c];
+            let [a, b] = [contact.geom_a, contact.geom_b].map(|g| &poses[g]);
+            let inactive = !ws.active[c];
+            prepare_candidate_at(model, ws, c, (a, b), &mut memo, inactive, None);
         }
-        if !posed {
-            GeomPoses::fill(model, state, &ws.geom_bounds, &mut poses);
-            posed = true;
-        }
-        let [a, b] = [contact.geom_a, contact.geom_b].map(|g| &poses[g]);
-        let inactive = !ws.active[c];
-        prepare_candidate_at(model, ws, c, (a, b), &mut memo, inactive, None);
     }
     ws.geom_poses = poses;
 }
@@ -203,9 +212,10 @@ impl GeomBound {
     }
 }
 
-/// A lower bound on the distance between two geoms of which one is a mesh: their separation
-/// along the axis through their origins, `d · (o_b - o_a) - h_a(d) - h_b(-d)` with `h` each
-/// shape's support function about its origin (−∞ for other pairs, or a plane). A mesh has
+/// A lower bound on the distance between two geoms of which one is a mesh, a box or a cylinder:
+/// their separation along the axis through their origins, `d · (o_b - o_a) - h_a(d) - h_b(-d)`
+/// with `h` each shape's support function about its origin, or along a box's face normals
+/// where larger (−∞ for other pairs, or a plane). A mesh has
 /// one candidate per hull vertex, each an `O(faces)` distance to prepare: arm links two joints
 /// apart lie within each other's bounding spheres yet well apart along the arm (pybullet_data's
 /// Panda URDF, 10330 candidates).
@@ -222,16 +232,28 @@ fn convex_pair_gap(model: &Model, (ga, gb): (usize, usize), a: &GeomBound, b: &G
     let cylinder = |s: &Shape| matches!(s, Shape::Cylinder { .. });
     let offset = b.frame.pos - a.frame.pos;
     let dist = offset.norm();
+    let boxed = |s: &Shape| matches!(s, Shape::Box { .. });
     let with_cylinder = cylinder(sa) || cylinder(sb);
-    if !(mesh(sa) || mesh(sb) || with_cylinder) || dist < 1e-12 {
+    if !(mesh(sa) || mesh(sb) || with_cylinder || boxed(sa) || boxed(sb)) || dist < 1e-12 {
         return f64::NEG_INFINITY;
     }
-    let d = offset / dist;
-    let (ha, hb) = (
-        support(sa, &(a.frame.rot.transpose() * d)),
-        support(sb, &(b.frame.rot.transpose() * -d)),
-    );
-    let along = dist - ha - hb;
+    // separation along the unit direction `d` (from a to b): a lower bound on the distance
+    let apart = |d: &Vector3<f64>| {
+        offset.dot(d)
+            - support(sa, &(a.frame.rot.transpose() * d))
+            - support(sb, &(b.frame.rot.transpose() * -d))
+    };
+    let mut along = apart(&(offset / dist));
+    // and along a box's face normals: two boxes face to face but offset sideways (a gripper's
+    // finger pads) are apart along those, by less along the line of their centres
+    for (s, g) in [(sa, a), (sb, b)] {
+        if boxed(s) {
+            for k in 0..3 {
+                let n = g.frame.rot.column(k).into_owned();
+                along = along.max(apart(&n)).max(apart(&-n));
+            }
+        }
+    }
     match (sa.core_segment(), sb.core_segment()) {
         (Some((half_a, ra)), Some((half_b, rb))) if with_cylinder => {
             let axis = |g: &GeomBound| g.frame.rot.column(2).into_owned();
@@ -559,6 +581,15 @@ fn corner_group(model: &Model, c: usize) -> std::ops::Range<usize> {
         run.end = next.end;
     }
     run
+}
+
+/// The end of the run of consecutive candidates from `c` between the same two geoms.
+fn pair_run_end(model: &Model, c: usize) -> usize {
+    let key = |k: &crate::contact::Contact| (k.geom_a, k.geom_b);
+    let first = key(&model.contacts[c]);
+    (model.contacts[c + 1..].iter())
+        .position(|k| key(k) != first)
+        .map_or(model.ncontact(), |i| c + 1 + i)
 }
 
 /// The run of consecutive candidates from `c` between the same two geoms with the same kind of
@@ -1045,11 +1076,14 @@ mod tests {
                         exact[c]
                     );
                     informative += usize::from(gap > 0.0);
-                    // a mesh pair's separation along its origins' axis: a bound too, and one
-                    // that culls where the spheres do not
+                    // a mesh, box or cylinder pair's separation along its origins' axis (and a
+                    // box's face normals): a bound too, and one that culls where the spheres
+                    // do not
+                    // (where positive: it culls only pairs apart by more than a margin; two
+                    // geoms overlapping are overlapped by some candidates by more than both)
                     let axis = convex_pair_gap(&model, (contact.geom_a, contact.geom_b), &a, &b);
                     assert!(
-                        axis <= exact[c] + 1e-12,
+                        axis <= 0.0 || axis <= exact[c] + 1e-12,
                         "candidate {c}: axis bound {axis} > distance {}",
                         exact[c]
                     );
@@ -1062,6 +1096,45 @@ mod tests {
             "a bound that never culls ({informative} positive)"
         );
         assert!(tighter > 100, "the axis bound never culls more ({tighter})");
+    }
+
+    #[test]
+    fn geoms_moving_together_skip_the_narrow_phase_but_approaching_ones_do_not() {
+        // two boxes 3 cm apart along x, 1 m above the floor, both flying at 5 m/s: each moves
+        // 5 cm in a step, more than their gap, so their speeds alone cannot cull the pair, but
+        // their relative speed is 0 and no candidate between them is prepared; with the same
+        // speeds towards each other, every one is (and a step then brings them into contact)
+        let cube = Shape::Box {
+            half_extents: Vector3::new(0.05, 0.05, 0.05),
+        };
+        let model = scene(&[cube.clone(), cube]);
+        let between: Vec<usize> = (model.contacts.iter().enumerate())
+            .filter(|(_, k)| model.geoms[k.geom_a].body != 0 && model.geoms[k.geom_b].body != 0)
+            .map(|(c, _)| c)
+            .collect();
+        assert!(between.len() >= 8, "{} box-box candidates", between.len());
+        let offset = Vector3::new(0.05, -0.1, 0.08); // the geoms' offset in their bodies
+        for (speed_b, prepared) in [(5.0, false), (-5.0, true)] {
+            let mut state = crate::State::reference(&model);
+            for (body, x) in [(1, 0.0), (2, 0.13)] {
+                let pos = Vector3::new(x, 0.0, 1.0) - offset;
+                let quat = nalgebra::UnitQuaternion::identity().into_inner();
+                state.set_pose(body, &Pose { pos, quat });
+            }
+            state.set_velocity(1, &Vector3::new(5.0, 0.0, 0.0), &Vector3::zeros());
+            state.set_velocity(2, &Vector3::new(speed_b, 0.0, 0.0), &Vector3::zeros());
+            let mut ws = Workspace::new(&model);
+            ws.active.fill(false);
+            prepare(&model, &state, &mut ws);
+            for &c in &between {
+                // (an edge slot without a crossing is left unprepared in any case)
+                if prepared && model.contacts[c].feature.is_crossing_slot() {
+                    continue;
+                }
+                assert_eq!(ws.prepared[c], prepared, "candidate {c}, speed {speed_b}");
+                assert!(ws.contact_phi_now[c] > 0.029, "{}", ws.contact_phi_now[c]);
+            }
+        }
     }
 
     #[test]
