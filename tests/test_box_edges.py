@@ -223,3 +223,21 @@ def test_hulls_resting_edge_on_edge_do_not_sink_into_each_other():
     assert least > -1e-8, (least, state)
     assert tr.min_distance.min() > -1e-8
     assert np.max(tr.energy - tr.energy[0]) < 1e-4 * abs(tr.energy[0])
+
+
+@pytest.mark.parametrize("seed", [196, 241])
+def test_a_hull_edge_through_another_hull_with_both_ends_outside_is_held(seed):
+    """Random hull piles 196 and 241 (``tests/stress``): an edge of one hull sank through another
+    with both of its ends outside, so no vertex candidate measured it, and the pair's edge
+    crossings did not hold it: the two overlapped by 4.7 and 3.0 cm by the separating-axis
+    test with every candidate's distance ≥ 0. Each hull's edges are now candidates against the
+    other hull (the edge's point nearest it, as box edges meet cylinders)."""
+    from stress._overlap import deepest_overlap
+    from stress._random_scenes import hull_pile_with_solids
+
+    m, _, solids = hull_pile_with_solids(seed)
+    tr = ukemi.rollout(m, m.make_state(), nsteps=80)
+    least, state = deepest_overlap(tr, solids)
+    assert least > -1e-7, (least, state)
+    assert tr.min_distance.min() > -1e-7
+    assert np.max(tr.energy - tr.energy[0]) < 1e-4 * abs(tr.energy[0])
