@@ -17,11 +17,15 @@ use crate::state::{State, Workspace};
 /// and the features held fixed for the step (near-flat disk rim points, box corners' faces:
 /// [`crate::contact::freeze_for_step`]).
 ///
-/// An inactive candidate whose geoms' bounding spheres are apart by more than the step could
-/// close at their speeds (`margin + h (2 (u_a + u_b) + h |g|)`, the candidate's margin
-/// ([`candidate_margin`]), `u` the fastest any point of a geom moves) skips the narrow phase: its distance is recorded as that lower bound,
-/// and its data are computed if it is activated ([`ensure_prepared`]). Measured 2026-12-02:
-/// the narrow phase of every candidate was 11% of an A1 step (1024 candidates).
+/// An inactive candidate whose geoms are apart (by their bounding spheres, or
+/// [`convex_pair_gap`]) by more than the step could close (`margin + h (2 u + h |g|)`, the
+/// candidate's margin ([`candidate_margin`]), `u` the smaller of the sum of the fastest any
+/// point of either geom moves and the pair's [`relative_speed`]) skips the narrow phase: its
+/// distance is recorded as that lower bound, and its data are computed if it is activated
+/// ([`ensure_prepared`]). Measured 2026-12-02: the narrow phase of every candidate was 11% of
+/// an A1 step (1024 candidates). The relative speed (session 45): the Panda's finger pads ride
+/// a hand swinging at metres per second but close only at the fingers' slide speed; by the
+/// speeds' sum all 25 pad pairs were prepared at every Table V step.
 pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
     let h = model.options.timestep;
     let drift = h * h * model.options.gravity.norm();
