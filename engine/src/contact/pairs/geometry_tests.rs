@@ -496,3 +496,84 @@ fn degenerate_configurations_stay_finite() {
     ws.iter().for_each(check_invariants);
     assert_vec(&ws[0].normal, [-1.0, 0.0, 0.0]); // axis_a × axis_b = (0, −1, 0) × (0, 0, 1)
 }
+
+fn hull_shape(points: &[Vector3<f64>]) -> Shape {
+    Shape::Mesh {
+        hull: std::sync::Arc::new(crate::contact::hull::ConvexHull::new(points).unwrap()),
+    }
+}
+
+fn is_edge_core(f: &Feature) -> bool {
+    matches!(
+        f,
+        Feature::CoreSolid {
+            a: Core::Edge { .. },
+            ..
+        } | Feature::SolidCore {
+            b: Core::Edge { .. },
+            ..
+        }
+    )
+}
+
+#[test]
+fn a_hull_edge_through_another_hull_with_both_ends_outside_is_measured_by_its_edge_core() {
+    // a 1 m triangular rod whose lowest edge runs 1 cm below the top face of a 20 cm cube,
+    // across it (turned 0.3 rad about z), both of its ends 0.4 m outside the cube: every
+    // vertex of either hull is outside the other, and the rod's lowest edge, as a core against
+    // the cube, finds the 1 cm overlap
+    let mut rod = Vec::new();
+    for x in [-0.5, 0.5] {
+        for (y, z) in [(0.0, 0.0), (-0.01, 0.02), (0.01, 0.02)] {
+            rod.push(Vector3::new(x, y, z));
+        }
+    }
+    let cube: Vec<Vector3<f64>> = (0..8)
+        .map(|k| {
+            Vector3::new(1.0, 1.0, 1.0) * 0.1
+                - Vector3::new(
+                    0.2 * f64::from(k & 1),
+                    0.2 * f64::from((k >> 1) & 1),
+                    0.2 * f64::from((k >> 2) & 1),
+                )
+        })
+        .collect();
+    let (a, b) = (hull_shape(&rod), hull_shape(&cube));
+    let (pa, pb) = (pose([0.0, 0.0, 0.09], [0.0, 0.0, 0.3]), at([0.0; 3]));
+    let (features, swapped) = candidates(&a, &b).unwrap();
+    assert!(!swapped);
+    let ws = eval_pair(&a, &pa, &b, &pb);
+    let edges: Vec<f64> = (features.iter().zip(&ws))
+        .filter(|(f, _)| is_edge_core(f))
+        .map(|(_, w)| w.phi)
+        .collect();
+    // 9 rod edges and 12 cube edges
+    assert_eq!(edges.len(), 9 + 12);
+    let vertices = (features.iter().zip(&ws))
+        .filter(|(f, _)| matches!(f, Feature::SphereHull { .. } | Feature::HullSphere { .. }))
+        .map(|(_, w)| w.phi)
+        .fold(f64::INFINITY, f64::min);
+    assert!(vertices > 0.05, "a vertex within reach: {vertices}");
+    let deepest = edges.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!((deepest + 0.01).abs() < 1e-9, "deepest edge {deepest}");
+}
+
+#[test]
+fn detailed_hulls_meet_at_their_vertices_only() {
+    // 200 points on a sphere: a hull of ~600 edges has no crossing slots, and no edge cores
+    let sphere: Vec<Vector3<f64>> = (0..200)
+        .map(|k| {
+            let z = 1.0 - 2.0 * (f64::from(k) + 0.5) / 200.0;
+            let phi = f64::from(k) * 2.399_963_229_728_653; // golden angle
+            let r = (1.0 - z * z).sqrt();
+            Vector3::new(r * phi.cos(), r * phi.sin(), z) * 0.1
+        })
+        .collect();
+    let cube: Vec<Vector3<f64>> = (0..8)
+        .map(|k| Vector3::new(f64::from(k & 1), f64::from((k >> 1) & 1), f64::from(k >> 2)))
+        .collect();
+    let (features, _) = candidates(&hull_shape(&sphere), &hull_shape(&cube)).unwrap();
+    assert!(!features.iter().any(is_edge_core));
+    assert!(!features.iter().any(|f| f.is_crossing_slot()));
+    assert_eq!(features.len(), 200 + 8);
+}
