@@ -46,15 +46,19 @@ pub(crate) fn prepare(model: &Model, state: &State, ws: &mut Workspace) {
         let skip = margin.is_finite() && run.clone().any(|c| !ws.active[c]) && {
             let key = (contact.geom_a, contact.geom_b);
             let (a, b) = (&ws.geom_bounds[key.0], &ws.geom_bounds[key.1]);
-            let gap = a.gap(b).max(convex_pair_gap(model, key, a, b));
-            let mut speed = a.speed + b.speed;
-            // (two geoms moving together, such as a gripper's finger pads, close at their
-            // relative speed; needed only where the speeds do not suffice)
-            if gap <= margin + 2.0 * h * speed + drift {
+            let reach = |speed: f64| margin + 2.0 * h * speed + drift;
+            let (mut gap, mut speed) = (a.gap(b), a.speed + b.speed);
+            // the tighter bounds only where the cheaper ones do not cull: the shapes' support
+            // functions, then the relative speed (two geoms moving together, such as a
+            // gripper's finger pads, close at their relative speed)
+            if gap <= reach(speed) {
+                gap = gap.max(convex_pair_gap(model, key, a, b));
+            }
+            if gap <= reach(speed) {
                 let (ga, gb) = (&model.geoms[key.0], &model.geoms[key.1]);
                 speed = speed.min(relative_speed(state, ga, gb));
             }
-            gap > margin + 2.0 * h * speed + drift && {
+            gap > reach(speed) && {
                 for c in run.clone().filter(|&c| !ws.active[c]) {
                     ws.prepared[c] = false;
                     ws.frozen[c] = None;
