@@ -1,14 +1,15 @@
 //! Per-phase timing of step Jacobians on an MJCF model (Table V workload: dt = 0.01, random
 //! controls in the control range, full minimal-coordinate A and B every step):
-//! `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml [STEPS] [KAPPA_GRAD|none] [coloured] [neutral]`
+//! `cargo run --release -p ukemi-engine --example gradient_phases -- MODEL.xml [STEPS] [KAPPA_GRAD|none] [coloured] [neutral] [maximal]`
 //! (`coloured` skips the column-by-column reference; `neutral` starts the central-path solve
-//! from the neutral point, `Options::central_warm_start = false`).
+//! from the neutral point, `Options::central_warm_start = false`; `maximal` takes the
+//! Jacobians in maximal coordinates).
 //! Linearises every step twice, with the coloured partials and with the column-by-column
 //! reference, and prints for each the mean milliseconds per step of the solve, the
 //! central-path move, the factorisation, the partial derivatives and the back-substitutions,
 //! the residual evaluations, and the largest difference between the two Jacobians; with
 //! `KAPPA_GRAD`, the central-path solve's iterations and how often it fell back to the neutral
-//! start.
+//! start; and a fingerprint of the coloured Jacobians' bits (to compare two builds).
 #![allow(clippy::print_stdout)]
 use ukemi_engine::{Coordinates, Linearization, PartialsMethod, PhaseTimes, Workspace, Wrt, step};
 
@@ -70,6 +71,8 @@ fn main() {
     let kappa: Option<f64> = args.get(3).and_then(|s| s.parse().ok());
     let flag = |f: &str| args.iter().skip(4).any(|s| s == f);
     let with_reference = !flag("coloured");
+    let maximal = flag("maximal");
+    let mut print = 0u64;
     let model = workload::load(path);
     let mut opts = model.options.clone();
     opts.central_warm_start = !flag("neutral");
@@ -84,7 +87,10 @@ fn main() {
     for _ in 0..steps {
         let ctrl = controls.next(&model);
         let lin = |m| {
-            let c = Coordinates::Minimal;
+            let c = match maximal {
+                true => Coordinates::Maximal,
+                false => Coordinates::Minimal,
+            };
             Linearization::with_method(&model, &state, &ctrl, c, Wrt::STATE_CTRL, kappa, m)
         };
         // a plain step from the same state, for the gradient overhead
@@ -106,6 +112,9 @@ fn main() {
         match both {
             Ok((a, ja, b)) => {
                 coloured.add(&a);
+                for x in ja.a.iter().chain(ja.b.iter()) {
+                    print = print.rotate_left(5) ^ x.to_bits();
+                }
                 if let Some(mut b) = b {
                     let jb = b.jacobians(&model).unwrap();
                     reference.add(&b);
@@ -144,6 +153,7 @@ fn main() {
         1e3 * with_jac / n
     );
     coloured.print("coloured");
+    println!("  Jacobian fingerprint {print:016x}");
     if with_reference {
         reference.print("column-by-column");
         println!("  max |J_coloured - J_reference| / max(1, max|J_reference|) = {worst:.1e}");

@@ -2,7 +2,9 @@
 step, for 1000 steps at dt = 0.01 with random controls in the control range, against MuJoCo
 (mj_step + mjd_transitionFD with forward differences, as ../shared/models/README.md measures
 its reference figures) on the same MJCF file, in the same run, each timing the mean of
-`--repeats` runs. Also forward only and the rollout VJP. Numbers are printed, not asserted.
+`--repeats` runs. Also forward only, the rollout VJP, and MuJoCo with centred differences
+(errors ~1e-10 relative, as ukemi's implicit Jacobians have, where forward differences at eps
+1e-6 have ~1e-6). Numbers are printed, not asserted.
 
     .venv/bin/python examples/benchmarks/table5.py            # reduced: 100 steps
     .venv/bin/python examples/benchmarks/table5.py --steps 1000 --repeats 5   # the README's
@@ -99,7 +101,7 @@ def bench_rollout_jacobians(model, ctrls, kappa_grad):
     return time.perf_counter() - t0, ok
 
 
-def bench_mujoco(path, ctrls, with_jac):
+def bench_mujoco(path, ctrls, with_jac, centred=False):
     import mujoco
 
     m = mujoco.MjModel.from_xml_path(str(path))
@@ -115,7 +117,9 @@ def bench_mujoco(path, ctrls, with_jac):
     for u in ctrls:
         d.ctrl[:] = u
         if with_jac:
-            mujoco.mjd_transitionFD(m, d, 1e-6, 0, A, B, None, None)  # forward differences
+            # forward differences (the and ../shared/models/README.md's reference), or
+            # centred ones: errors ~1e-10 like ukemi's implicit Jacobians, not ~1e-6
+            mujoco.mjd_transitionFD(m, d, 1e-6, int(centred), A, B, None, None)
         mujoco.mj_step(m, d)
     return time.perf_counter() - t0
 
@@ -141,7 +145,8 @@ def main():
     rng = np.random.default_rng(args.seed)
     print(f"{'model':24s} {'nv':>4s} {'nu':>3s} | {'ukemi fwd':>10s} {'mj fwd':>9s} | "
           f"{'ukemi A,B':>10s} {'mj FD':>9s} {'ratio':>6s} {'grad ovh':>9s} | "
-          f"{'rollout A,B':>11s} {'/mj FD':>7s} | {'rollout VJP':>11s} {'/mj FD':>7s}")
+          f"{'rollout A,B':>11s} {'/mj FD':>7s} | {'rollout VJP':>11s} {'/mj FD':>7s} | "
+          f"{'mj cFD':>8s} {'A,B/cFD':>7s}")
     for name, path in models():
         if args.only not in name:
             continue
@@ -165,14 +170,17 @@ def main():
         tj, fj, oj = mean(lambda: bench_ukemi(model, ctrls, True, kappa))
         tr, okr = mean(lambda: bench_rollout_jacobians(model, ctrls, kappa))
         tv, okv = mean(lambda: bench_rollout_vjp(model, ctrls, kappa))
-        mf, mj = mean(lambda: (bench_mujoco(path, ctrls, False), bench_mujoco(path, ctrls, True)))
+        mf, mj, mc = mean(lambda: (bench_mujoco(path, ctrls, False), bench_mujoco(path, ctrls, True),
+                                   bench_mujoco(path, ctrls, True, centred=True)))
         print(f"{name:24s} {model.nv:4d} {model.nu:3d} | {tf:9.3f}s {mf:8.3f}s | {tj:9.3f}s {mj:8.3f}s "
               f"{tj / mj:6.2f} {oj:8.3f}s | {tr:10.3f}s{'' if okr else '*'} {tr / mj:7.2f} | "
-              f"{tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f}"
+              f"{tv:10.3f}s{'' if okv else '*'} {tv / mj:7.2f} | {mc:7.3f}s {tj / mc:7.2f}"
               + (f"   ({ff} fwd / {fj} jac steps unconverged)" if ff or fj else ""))
     print("ratio = ukemi/MuJoCo (target: A,B ≤ 0.5; rollout VJP ≤ 0.1 of MuJoCo's FD); "
           "grad ovh = step_jacobians minus a plain step from the same states (successful ones); "
           "rollout A,B = the same workload in one ukemi.rollout_jacobians call; "
+          "mj cFD = MuJoCo with centred differences (the accuracy of ukemi's Jacobians), "
+          "A,B/cFD = ukemi A,B against it; "
           "* = the rollout stopped at an unconverged step; "
           f"the rollouts ran on {ukemi.get_num_threads()} thread(s)")
 
