@@ -1086,9 +1086,9 @@ const RETRIES: usize = 2;
 /// with unscaled friction-cone rows, at most `max_retries` retries (each rescues steps the
 /// others stall on: a warm start sits on the previous solution's cone boundary, poor when
 /// contacts change state; the scaled and unscaled directions stall in different degenerate
-/// configurations). An attempt that stalls
-/// at an acceptable iterate still lets the retries try for full convergence; if they fail, the
-/// acceptable iterate is the result.
+/// configurations). An attempt that stalls at an acceptable iterate is first solved on from
+/// that iterate recentred ([`resume_recentred`]), then the retries try for full convergence;
+/// if they all fail, the acceptable iterate is the result.
 fn solve_active(
     model: &Model,
     state: &State,
@@ -1131,6 +1131,13 @@ fn solve_active(
             ws.w_acceptable.copy_from_slice(&ws.w);
             ws.saturated_acceptable.copy_from_slice(&ws.saturated);
             acceptable = Some(report);
+            // first on from the acceptable iterate itself, recentred; cold only if that fails
+            report = resume_recentred(model, state, ws);
+            iterations += report.iterations;
+            let stalled_near = report.status == SolveStatus::Acceptable && ws.stalled_near;
+            if report.status == SolveStatus::Converged || stalled_near {
+                break;
+            }
         }
         restart_cold(model, state, ws);
         ws.attempt = ws.attempt.saturating_add(1);
@@ -1151,6 +1158,32 @@ fn solve_active(
     }
     report.iterations = iterations;
     report
+}
+
+/// Mean complementarity at which [`resume_recentred`] puts an acceptable iterate's pairs back
+/// on the central path.
+const RECENTRE_KAPPA: f64 = 1e-7;
+
+/// Solve on from an attempt that ended at an acceptable iterate without converging, its
+/// complementarity pairs (those of the active candidates and limits whose friction is not held)
+/// moved onto the central path at [`RECENTRE_KAPPA`] first ([`super::central::centre_some`]).
+///
+/// Why: such attempts stall with pairs pressed against their cones' boundaries (the direction
+/// cut to ~1e-13 of its length by a cone the pair cannot turn inside), a few hundredths of a
+/// micrometre or less from the solution; the cold retries that followed threw that iterate
+/// away and took 25-30 iterations each, and converged in 1911 of the 4864 such steps of the
+/// 250 hull piles (246k of their 1.18M iterations). Recentred, the iterate can turn and most
+/// converge in a few iterations; the cold retries stay for those that do not (BENCHMARKS.md,
+/// session 46).
+fn resume_recentred(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
+    let nc = model.ncontact();
+    let active = ws.active.clone();
+    let free: Vec<bool> = ws.saturated.iter().map(Option::is_none).collect();
+    let contact = |c: usize| active[c] && free[c];
+    let limit = |j: usize| active[nc + j];
+    super::central::centre_some(model, state, ws, RECENTRE_KAPPA, contact, limit);
+    ws.attempt = ws.attempt.saturating_add(1);
+    super::ipm::solve(model, state, ws)
 }
 
 fn solve_newton(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
