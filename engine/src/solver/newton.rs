@@ -1169,12 +1169,13 @@ const RECENTRE_KAPPA: f64 = 1e-7;
 /// moved onto the central path at [`RECENTRE_KAPPA`] first ([`super::central::centre_some`]).
 ///
 /// Why: such attempts stall with pairs pressed against their cones' boundaries (the direction
-/// cut to ~1e-13 of its length by a cone the pair cannot turn inside), a few hundredths of a
-/// micrometre or less from the solution; the cold retries that followed threw that iterate
-/// away and took 25-30 iterations each, and converged in 1911 of the 4864 such steps of the
-/// 250 hull piles (246k of their 1.18M iterations). Recentred, the iterate can turn and most
-/// converge in a few iterations; the cold retries stay for those that do not (BENCHMARKS.md,
-/// session 46).
+/// cut to ~1e-13 of its length by a cone the pair cannot turn inside), within the acceptable
+/// tolerances of the solution; the cold retries that followed threw that iterate away and took
+/// 25-30 iterations each, and converged in 1911 of the 4864 such steps of the 250 hull piles
+/// (246k of their 1.18M iterations). Recentred, the pairs can turn: hull pile 114's step 126
+/// converges in 32 iterations where it ended acceptable after 78, and on the same states the
+/// hull piles take 6.8% fewer iterations, the shared robots 0-1.3% fewer; the cold retries stay
+/// for the attempts that stall again (BENCHMARKS.md, session 46).
 fn resume_recentred(model: &Model, state: &State, ws: &mut Workspace) -> StepReport {
     let nc = model.ncontact();
     let active = ws.active.clone();
