@@ -297,6 +297,16 @@ pub enum Frozen {
     /// A cylinder rim against a plane or another solid: the material rim point (in the
     /// cylinder's geom frame), see [`disk_rim_for_step`].
     Rim(Vector3<f64>),
+    /// A disk's rim point against a plane re-frozen after a solve more than a quarter turn
+    /// round the rim from the point its contact frame was built at (an impulse there could not
+    /// lift it): the gap is measured at `point`, the impulse acts at `frame` (both material
+    /// points of the rim, in the cylinder's geom frame), see `activation::refreeze_disks`.
+    RimFramed {
+        /// The rim point the gap is measured at.
+        point: Vector3<f64>,
+        /// The rim point the contact frame is built at.
+        frame: Vector3<f64>,
+    },
     /// Box corner against a box: the corner is measured against the plane of this face of the
     /// box (axis of the box's geom frame, outward side ±1), see [`box_face_for_step`].
     Face {
@@ -352,7 +362,7 @@ pub fn witness_frozen_at(
             geometry::frozen_rim(&c.feature, point, wa, wb)
                 .unwrap_or_else(|| geometry::evaluate(&c.feature, &ga.shape, wa, &gb.shape, wb))
         }
-        (Some(Frozen::Rim(center)), _) => {
+        (Some(Frozen::Rim(center) | Frozen::RimFramed { point: center, .. }), _) => {
             let a = geometry::Ball {
                 center,
                 radius: 0.0,

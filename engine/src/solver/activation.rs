@@ -7,7 +7,7 @@
 use nalgebra::Vector3;
 
 use super::inequality::active_candidates;
-use crate::contact::geometry::GeomPose;
+use crate::contact::geometry::{Feature, GeomPose};
 use crate::contact::{Frozen, StepRows, predicted_pose, witness_frozen};
 use crate::joints::geometry::{JointFrame, Pose};
 use crate::model::Model;
@@ -313,9 +313,9 @@ pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) 
 }
 
 /// [`prepare`] for each `(c, frozen)` of `candidates` (its contact frame at `state` with the
-/// feature chosen at the state's predicted poses, as a solve prepares it), then holding
-/// `frozen` as the feature its gap at the next poses is measured with: the one the solve ended
-/// with, which [`refreeze_disks`] may have moved after the frame was prepared. The gradients
+/// feature chosen at the state's predicted poses, as a solve prepares it, or with the held
+/// rim point or edge crossing), then holding `frozen` as the feature its gap at the next poses
+/// is measured with: the one the solve ended with, which [`refreeze_disks`] may have moved. The gradients
 /// linearise a solved step so, also at perturbed states (the features are material: a rim
 /// point or a face of the geom). Each geom's poses are computed once per call (a box's corner
 /// candidates share their geom), bit for bit what preparing each candidate alone computes.
@@ -363,8 +363,9 @@ fn prepare_candidate_with(
 /// [`prepare_candidate_with`] with the poses and velocities of the candidate's geoms; with
 /// `skip_empty`, an edge slot that holds no crossing this step is left unprepared (see
 /// below). An edge slot given a crossing to `hold` builds its frame from it (one found after a
-/// solve, [`refreeze_crossings`]); other candidates build theirs from the feature frozen at the
-/// step's start whatever they hold later (a disk's re-frozen rim point is near the first).
+/// solve, [`refreeze_crossings`]), a disk given a [`Frozen::RimFramed`] at its `frame` point
+/// ([`refreeze_disks`]); other candidates build theirs from the feature frozen at the step's
+/// start whatever they hold later (a disk's rim point re-frozen within a quarter turn of it).
 fn prepare_candidate_at(
     model: &Model,
     ws: &mut Workspace,
@@ -385,6 +386,7 @@ fn prepare_candidate_at(
     };
     ws.frozen[c] = match hold {
         Some(held @ Frozen::Crossing { .. }) if slot => Some(held),
+        Some(Frozen::RimFramed { frame, .. }) => Some(Frozen::Rim(frame)),
         _ => crate::contact::freeze_for_step_at(
             contact,
             &model.geoms,
@@ -952,23 +954,87 @@ const DISK_REFREEZE_TOL: f64 = 1e-10;
 /// After a solve: every frozen disk–plane candidate whose exact lowest rim point at the new
 /// configuration is below `-DISK_REFREEZE_TOL` is re-frozen at that point (the velocity change
 /// of the step moved the lowest point away from the predicted one); returns how many were (the
-/// step must then be solved again). The contact frames stay those prepared with the first
-/// freeze; the gradients linearise the step so (`prepare_candidates_holding`).
-pub(crate) fn refreeze_disks(model: &Model, ws: &mut Workspace) -> usize {
+/// step must then be solved again). A disk against a plane whose lowest point jumped across
+/// the disk, more than a quarter turn round the rim both from the point it held and from the
+/// point its contact frame was built at, has its frame built again at the new point
+/// ([`Frozen::RimFramed`]): an upward impulse at a rim point tips a thin disk's far side down,
+/// so the old frame could not lift the new point. (Random pile 198's cylinder lying flat on the
+/// floor, struck by a capsule at 4.4 m/s, was re-frozen on the opposite side of its rim 3 mm
+/// deep: no solution, and the step failed 14 mm deep; with the frame moved it converges in 69
+/// iterations.) Otherwise the frame stays: a frame that followed every re-freeze made the
+/// rounds rock a disk between two rim points 30° apart (random pile 20), one moved when a
+/// lowest point that slid round the rim in steps of 10-30° passed a quarter turn left a wobbling
+/// disk's step unconverged (pile 210), and a cylinder against another solid (a core point that
+/// slides along the axes of two cylinders lying side by side: pile 10) never moves it. The
+/// gradients linearise the step so (`prepare_candidates_holding`).
+pub(crate) fn refreeze_disks(model: &Model, state: &State, ws: &mut Workspace) -> usize {
     let mut n = 0;
+    let mut memo = crate::contact::BoxPairMemo::default();
     for (c, contact) in model.contacts.iter().enumerate() {
-        if !matches!(ws.frozen[c], Some(Frozen::Rim(_))) || !ws.active[c] {
+        let held = ws.frozen[c];
+        if !matches!(held, Some(Frozen::Rim(_) | Frozen::RimFramed { .. })) || !ws.active[c] {
             continue;
         }
         let next = |x: usize| next_pose(&ws.next_pose, x);
         let (exact, pa, pb) = witness_frozen(contact, &model.geoms, next, None);
-        if exact.phi < -DISK_REFREEZE_TOL {
-            ws.frozen[c] = crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true)
-                .map(Frozen::Rim);
-            n += 1;
+        if exact.phi >= -DISK_REFREEZE_TOL {
+            continue;
+        }
+        n += 1;
+        let rim = crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true);
+        let (Some(point), Some(frame)) = (rim, rim_frame_point(model, state, c, held)) else {
+            ws.frozen[c] = rim.map(Frozen::Rim);
+            continue;
+        };
+        let last = match held {
+            Some(Frozen::Rim(p) | Frozen::RimFramed { point: p, .. }) => p,
+            _ => point,
+        };
+        let far = match contact.feature {
+            Feature::DiskPlane { center_a, .. } => {
+                let across = |p: Vector3<f64>| (p - center_a).dot(&(point - center_a)) < 0.0;
+                across(frame) && across(last)
+            }
+            _ => false,
+        };
+        if far {
+            let moved = Frozen::RimFramed {
+                point,
+                frame: point,
+            };
+            prepare_candidate_with(model, state, ws, c, &mut memo, Some(moved));
+            ws.frozen[c] = Some(moved);
+        } else if let Some(Frozen::RimFramed { frame, .. }) = held {
+            ws.frozen[c] = Some(Frozen::RimFramed { point, frame });
+        } else {
+            ws.frozen[c] = Some(Frozen::Rim(point));
         }
     }
     n
+}
+
+/// The rim point (the disk's geom frame) that candidate `c`'s contact frame was built at while
+/// it holds `held`: a moved frame's, else the point frozen at the step's predicted poses (as
+/// [`prepare`] froze it).
+fn rim_frame_point(
+    model: &Model,
+    state: &State,
+    c: usize,
+    held: Option<Frozen>,
+) -> Option<Vector3<f64>> {
+    if let Some(Frozen::RimFramed { frame, .. }) = held {
+        return Some(frame);
+    }
+    let contact = &model.contacts[c];
+    let h = model.options.timestep;
+    let ahead = |g: usize| predicted_pose(state, model.geoms[g].body, h);
+    crate::contact::disk_rim_for_step(
+        contact,
+        &model.geoms,
+        &ahead(contact.geom_a),
+        &ahead(contact.geom_b),
+        false,
+    )
 }
 
 /// Penetration (m) of an edge crossing that a solve did not hold (the crossings were found at

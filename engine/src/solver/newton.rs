@@ -960,7 +960,7 @@ pub(crate) fn solve(model: &Model, state: &State, ws: &mut Workspace) -> StepRep
         ws.active_solved.copy_from_slice(&ws.active);
         let missed = super::activation::missed_contacts(model, ws)
             + super::activation::missed_limits(model, ws)
-            + super::activation::refreeze_disks(model, ws)
+            + super::activation::refreeze_disks(model, state, ws)
             + super::activation::refreeze_crossings(model, state, ws);
         if missed == 0 {
             break;
