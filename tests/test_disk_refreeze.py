@@ -1,12 +1,15 @@
-"""A near-flat disk on a plane whose rim point is re-frozen after a solve far round its rim from
-the point its contact frame was built at gets its frame built again there
-(``engine/src/solver/activation.rs``, ``refreeze_disks``; ``Frozen::RimFramed``)."""
+"""Cylinder rims held for a step: a near-flat disk on a plane whose rim point is re-frozen after a
+solve across the disk from the point its contact frame was built at gets its frame built again
+there (``engine/src/solver/activation.rs``, ``refreeze_disks``; ``Frozen::RimFramed``), and a
+capsule lying across an end disk is held at the chord's two ends (each rim's nearest and
+second points against the capsule, ``engine/src/contact/geometry.rs``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+import pytest
 from stress._random_scenes import random_pile
 
 import ukemi
@@ -21,14 +24,16 @@ def test_a_rim_point_refrozen_across_the_disk_moves_its_contact_frame():
     lowest point was on the opposite side, 3 mm deep. Re-frozen there with the impulse still
     acting at the first point, the step had no solution (an upward impulse on one side of a
     thin disk tips its far side down): every attempt and every subdivision failed, and the step
-    ended unconverged with the capsule 14 mm inside the cylinder. With the frame moved to the
-    new point the step converges, touching and not penetrating, and loses energy (an inelastic
-    impact).
+    ended unconverged with the capsule 14 mm inside the cylinder (so it still does with the
+    frame left where it was). With the frame moved to the new point the step converges,
+    touching and not penetrating, and loses energy (an inelastic impact).
 
-    The state is the pile's state before step 45 as the engine of 2026-12-05 (3c7f9aa)
-    simulated it, read from its snapshot (warm start included): the steps before are chaotic."""
+    The state is the pile's positions and velocities before step 45 as the engine of 2026-12-05
+    (3c7f9aa) simulated them (the steps before are chaotic), without their warm start: the step
+    fails from it the same way."""
     m, _ = random_pile(198)
-    s = m.state_from_snapshot(np.load(DATA / "pile198_step45_snapshot.npy"))
+    data = np.load(DATA / "pile198_step45_qpos_qvel.npz")
+    s = m.make_state(qpos=data["qpos"], qvel=data["qvel"])
     nxt, info = ukemi.step(m, s, None)
     assert info.status == "converged", info
     assert info.subdivisions == 1 and info.iterations < 150, info
@@ -44,3 +49,21 @@ def test_pile_198_runs_without_a_failed_step():
     assert tr.converged
     assert tr.min_distance.min() > -1e-6
     assert np.max(tr.energy - tr.energy[0]) < 1e-4 * abs(tr.energy[0])
+
+
+@pytest.mark.parametrize("index", [46, 52, 61, 111])
+def test_a_capsule_dropped_across_a_lying_cylinder_stays_out_of_it(index):
+    """Drops of ``tests/stress/capsule_drops.py`` (seed 0) that ended a step unconverged 6-22 mm
+    deep: the capsule came to lie across the cylinder's end disk, touching its rim at a chord's
+    two ends, and the segment's one nearest point swapped between them every check round. With
+    each rim's nearest and second points against the capsule as candidates, every step
+    converges and nothing ends deeper than 1 µm."""
+    from stress.capsule_drops import drop
+
+    rng = np.random.default_rng(0)
+    for _ in range(index):
+        drop(rng)
+    m, s = drop(rng)
+    tr = ukemi.rollout(m, s, nsteps=40, on_failure="return")
+    assert tr.converged
+    assert tr.min_distance.min() > -1e-6
