@@ -541,34 +541,37 @@ mod tests {
         assert_eq!(t, -1.0);
     }
 
-    #[test]
-    fn a_rim_under_a_lying_cylinder_has_its_second_point_at_the_other_chord_end() {
-        // a disk of radius 0.05 at z = 0 (its rim in the xy plane, centred at the origin) under
-        // a cylinder of radius 0.04 lying along y with its axis at x = 0.01, z = 0.05: the rim
-        // meets the lying cylinder's lowest line at the chord's ends, θ = ±acos(0.01 / 0.05)
-        let (r, x_axis) = (0.05, 0.01);
-        let solid = Solid::Cylinder {
-            radius: 0.04,
-            half_length: 0.3,
-        };
+    /// A disk of radius `r` at z = 0 (its rim in the xy plane, centred at the origin) under
+    /// `solid` lying along y with its axis at x = `x_axis`, z = `z_axis`: its nearest and second
+    /// rim points are the chord's two ends, θ = ±acos(x_axis / r), both `gap` below the solid.
+    fn assert_chord_ends(solid: &Solid, r: f64, (x_axis, z_axis): (f64, f64), gap: f64) {
         // the solid's frame: its axis along y, so the disk's frame in it is turned by 90° about x
-        let to_solid = |p: Vector3<f64>| Vector3::new(p.x - x_axis, -(p.z - 0.05), p.y);
+        let to_solid = |p: Vector3<f64>| Vector3::new(p.x - x_axis, -(p.z - z_axis), p.y);
         let c = to_solid(Vector3::zeros());
         let (u, v) = (to_solid(Vector3::x()) - c, to_solid(Vector3::y()) - c);
         let end = (x_axis / r).acos();
         let rim = Circle { c, u, v, r };
-        let (first, second) = (rim.minimiser(&solid), rim.second_minimiser(&solid));
+        let (first, second) = (rim.minimiser(solid), rim.second_minimiser(solid));
         let [a, b] = [first, second].map(|t| t.sin().atan2(t.cos()));
         let (lo, hi) = (a.min(b), a.max(b));
         assert!(
             (lo + end).abs() < 1e-9 && (hi - end).abs() < 1e-9,
             "{a} {b} vs ±{end}"
         );
-        // both 1 cm below the lying cylinder's lowest line (z = 0.01)
         for t in [first, second] {
             let d = solid.distance(&rim.point(t)).0;
-            assert!((d - 0.01).abs() < 1e-12, "{d}");
+            assert!((d - gap).abs() < 1e-12, "{d}");
         }
+    }
+
+    #[test]
+    fn a_rim_under_a_lying_cylinder_has_its_second_point_at_the_other_chord_end() {
+        // a cylinder of radius 0.04 lying with its axis 5 cm above the disk: 1 cm above the rim
+        let solid = Solid::Cylinder {
+            radius: 0.04,
+            half_length: 0.3,
+        };
+        assert_chord_ends(&solid, 0.05, (0.01, 0.05), 0.01);
     }
 
     #[test]
@@ -595,31 +598,12 @@ mod tests {
 
     #[test]
     fn a_rim_under_a_lying_capsule_has_its_points_at_the_chord_ends() {
-        // the disk of radius 0.05 at z = 0 under a capsule of radius 0.02 lying along y at
-        // x = 0.03, its segment at z = 0.03: the rim meets the capsule's lowest line at the
-        // chord's two ends, θ = ±acos(0.03 / 0.05), both 1 cm below it
-        let (r, x_axis) = (0.05, 0.03);
+        // a capsule of radius 0.02 lying with its segment 3 cm above the disk: 1 cm above the rim
         let solid = Solid::Capsule(Segment {
             half_length: 0.2,
             radius: 0.02,
         });
-        // the capsule's frame: its segment along y, so the disk's frame in it is turned by 90°
-        let to_solid = |p: Vector3<f64>| Vector3::new(p.x - x_axis, -(p.z - 0.03), p.y);
-        let c = to_solid(Vector3::zeros());
-        let (u, v) = (to_solid(Vector3::x()) - c, to_solid(Vector3::y()) - c);
-        let end = (x_axis / r).acos();
-        let rim = Circle { c, u, v, r };
-        let (first, second) = (rim.minimiser(&solid), rim.second_minimiser(&solid));
-        let [a, b] = [first, second].map(|t| t.sin().atan2(t.cos()));
-        let (lo, hi) = (a.min(b), a.max(b));
-        assert!(
-            (lo + end).abs() < 1e-9 && (hi - end).abs() < 1e-9,
-            "{a} {b} vs ±{end}"
-        );
-        for t in [first, second] {
-            let d = solid.distance(&rim.point(t)).0;
-            assert!((d - 0.01).abs() < 1e-12, "{d}");
-        }
+        assert_chord_ends(&solid, 0.05, (0.03, 0.03), 0.01);
     }
 
     #[test]
