@@ -511,23 +511,6 @@ pub fn evaluate(
 }
 
 impl Feature {
-    /// Whether this is a cylinder's rim point against a capsule. A capsule lying across a
-    /// cylinder's end disk touches its rim at a chord's two ends, and the segment's one nearest
-    /// point swapped between them every check round: capsules dropped at 1-6 m/s on a lying
-    /// cylinder ended a step unconverged or deeper than 1 µm in 90 of 600 drops, 32 with
-    /// these (`python -m tests.stress.capsule_drops`). A robot's own links leave them out
-    /// (`ModelBuilder`): the shared A1's legs against its hip and trunk cylinders took 500 of
-    /// them, its step 0.72 → 1.08 ms.
-    pub fn is_rim_on_capsule(&self) -> bool {
-        matches!(
-            self,
-            Feature::SolidCore {
-                a: Solid::Capsule(_),
-                b: Core::Rim { .. }
-            }
-        )
-    }
-
     /// Whether this is an edge-crossing slot ([`Feature::BoxEdge`], [`Feature::CapsuleEdge`]):
     /// most hold nothing at any step, and they are not pairs of the problem's degree.
     pub fn is_crossing_slot(&self) -> bool {
@@ -543,7 +526,7 @@ pub fn polytope(solid: &Solid) -> Option<box_edges::Polytope<'_>> {
     match solid {
         Solid::Box { half_extents } => Some(box_edges::Polytope::Box(half_extents)),
         Solid::Hull(hull) => Some(box_edges::Polytope::Hull(hull)),
-        Solid::Cylinder { .. } | Solid::Capsule(_) => None,
+        Solid::Cylinder { .. } => None,
     }
 }
 
@@ -881,12 +864,8 @@ fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
             let crossings = capsule_slots(a, Solid::Box { half_extents });
             Some(balls.into_iter().chain(crossings).collect())
         }
-        // the segment's point nearest the cylinder, then the end spheres, then each rim's
-        // nearest and second points against the capsule (see `is_rim_on_capsule`)
-        Shape::Cylinder {
-            radius,
-            half_length,
-        } => {
+        // the segment's point nearest the cylinder, then the end spheres
+        Shape::Cylinder { .. } => {
             let b = solid(b)?;
             let first = Feature::CoreSolid {
                 a: Core::Segment(a),
@@ -896,14 +875,7 @@ fn capsule_against(a: Segment, b: &Shape) -> Option<Vec<Feature>> {
                 a: Core::Ball(end),
                 b: b.clone(),
             });
-            let rims = [-half_length, half_length]
-                .into_iter()
-                .flat_map(|z| [false, true].map(|second| Core::Rim { z, radius, second }))
-                .map(|core| Feature::SolidCore {
-                    a: Solid::Capsule(a),
-                    b: core,
-                });
-            Some([first].into_iter().chain(rest).chain(rims).collect())
+            Some([first].into_iter().chain(rest).collect())
         }
         // as against a box: the end spheres and the midpoint sphere, then the segment's
         // crossings of the hull's edges (hulls of up to 255 edges)

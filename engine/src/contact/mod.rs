@@ -716,7 +716,6 @@ fn solid_radius(solid: &geometry::Solid) -> f64 {
         geometry::Solid::Box { half_extents } => half_extents.norm(),
         geometry::Solid::Hull(h) => h.radius(),
         geometry::Solid::Cylinder { .. } => f64::INFINITY,
-        geometry::Solid::Capsule(s) => s.half_length + s.radius,
     }
 }
 

@@ -764,13 +764,9 @@ fn add_candidates(
         }
         _ => false,
     };
-    // a cylinder's rims against a capsule of the same mechanism (a robot's own links) are left
-    // out: they guard a capsule lying across an end disk, which free objects do
-    let own_links = one_mechanism(joints, geoms[a].body, geoms[b].body);
-    let left_out = |f: &geometry::Feature| {
-        (never_cross && f.is_crossing_slot()) || (own_links && f.is_rim_on_capsule())
-    };
-    let features = features.into_iter().filter(|f| !left_out(f));
+    let features = features
+        .into_iter()
+        .filter(|f| !(never_cross && f.is_crossing_slot()));
     out.extend(features.into_iter().map(|feature| Contact {
         geom_a: a,
         geom_b: b,
@@ -781,34 +777,6 @@ fn add_candidates(
         slide_limits: slide_limits.clone(),
     }));
     Ok(())
-}
-
-/// Whether bodies `a` and `b` are joined through joints that do not pass through the world
-/// (links of one mechanism, e.g. a floating robot's legs and trunk).
-fn one_mechanism(joints: &[Joint], a: usize, b: usize) -> bool {
-    if a == 0 || b == 0 {
-        return false;
-    }
-    let mut reached = vec![a];
-    let mut k = 0;
-    while k < reached.len() {
-        let body = reached[k];
-        for j in joints {
-            let next = match (j.parent, j.child) {
-                (p, c) if p == body && c != 0 => c,
-                (p, c) if c == body && p != 0 => p,
-                _ => continue,
-            };
-            if next == b {
-                return true;
-            }
-            if !reached.contains(&next) {
-                reached.push(next);
-            }
-        }
-        k += 1;
-    }
-    false
 }
 
 /// Frictionless if either geom asks for impact or the pair's friction is 0, else linear if either

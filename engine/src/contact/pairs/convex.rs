@@ -63,8 +63,6 @@ pub enum Solid {
     },
     /// A mesh's convex hull.
     Hull(Arc<ConvexHull>),
-    /// Capsule along z, centred at the origin (what a cylinder's rims meet a capsule as).
-    Capsule(Segment),
 }
 
 impl Solid {
@@ -78,27 +76,8 @@ impl Solid {
                 half_length,
             } => cylinder_distance(q, *radius, *half_length),
             Solid::Hull(hull) => hull.signed_distance(q),
-            Solid::Capsule(segment) => capsule_distance(q, segment.radius, segment.half_length),
         }
     }
-}
-
-/// Signed distance from `q` to the capsule of `radius` about the segment of `half` length along
-/// z: `(distance, surface point, outward normal)`. On the segment the direction is +x.
-pub fn capsule_distance(
-    q: &Vector3<f64>,
-    radius: f64,
-    half: f64,
-) -> (f64, Vector3<f64>, Vector3<f64>) {
-    let axis_point = Vector3::new(0.0, 0.0, q.z.clamp(-half, half));
-    let offset = q - axis_point;
-    let norm = offset.norm();
-    let normal = if norm > MIN_NORM {
-        offset / norm
-    } else {
-        Vector3::x()
-    };
-    (norm - radius, axis_point + radius * normal, normal)
 }
 
 /// The part of a geom whose point nearest a [`Solid`] is a candidate.
@@ -541,69 +520,34 @@ mod tests {
         assert_eq!(t, -1.0);
     }
 
-    /// A disk of radius `r` at z = 0 (its rim in the xy plane, centred at the origin) under
-    /// `solid` lying along y with its axis at x = `x_axis`, z = `z_axis`: its nearest and second
-    /// rim points are the chord's two ends, θ = ±acos(x_axis / r), both `gap` below the solid.
-    fn assert_chord_ends(solid: &Solid, r: f64, (x_axis, z_axis): (f64, f64), gap: f64) {
+    #[test]
+    fn a_rim_under_a_lying_cylinder_has_its_second_point_at_the_other_chord_end() {
+        // a disk of radius 0.05 at z = 0 (its rim in the xy plane, centred at the origin) under
+        // a cylinder of radius 0.04 lying along y with its axis at x = 0.01, z = 0.05: the rim
+        // meets the lying cylinder's lowest line at the chord's ends, θ = ±acos(0.01 / 0.05)
+        let (r, x_axis) = (0.05, 0.01);
+        let solid = Solid::Cylinder {
+            radius: 0.04,
+            half_length: 0.3,
+        };
         // the solid's frame: its axis along y, so the disk's frame in it is turned by 90° about x
-        let to_solid = |p: Vector3<f64>| Vector3::new(p.x - x_axis, -(p.z - z_axis), p.y);
+        let to_solid = |p: Vector3<f64>| Vector3::new(p.x - x_axis, -(p.z - 0.05), p.y);
         let c = to_solid(Vector3::zeros());
         let (u, v) = (to_solid(Vector3::x()) - c, to_solid(Vector3::y()) - c);
         let end = (x_axis / r).acos();
         let rim = Circle { c, u, v, r };
-        let (first, second) = (rim.minimiser(solid), rim.second_minimiser(solid));
+        let (first, second) = (rim.minimiser(&solid), rim.second_minimiser(&solid));
         let [a, b] = [first, second].map(|t| t.sin().atan2(t.cos()));
         let (lo, hi) = (a.min(b), a.max(b));
         assert!(
             (lo + end).abs() < 1e-9 && (hi - end).abs() < 1e-9,
             "{a} {b} vs ±{end}"
         );
+        // both 1 cm below the lying cylinder's lowest line (z = 0.01)
         for t in [first, second] {
             let d = solid.distance(&rim.point(t)).0;
-            assert!((d - gap).abs() < 1e-12, "{d}");
+            assert!((d - 0.01).abs() < 1e-12, "{d}");
         }
-    }
-
-    #[test]
-    fn a_rim_under_a_lying_cylinder_has_its_second_point_at_the_other_chord_end() {
-        // a cylinder of radius 0.04 lying with its axis 5 cm above the disk: 1 cm above the rim
-        let solid = Solid::Cylinder {
-            radius: 0.04,
-            half_length: 0.3,
-        };
-        assert_chord_ends(&solid, 0.05, (0.01, 0.05), 0.01);
-    }
-
-    #[test]
-    fn a_capsule_is_measured_from_its_segment() {
-        let segment = Segment {
-            half_length: 0.1,
-            radius: 0.02,
-        };
-        let solid = Solid::Capsule(segment);
-        // beside the segment, beyond an end, inside
-        for (q, d, normal) in [
-            (Vector3::new(0.05, 0.0, 0.03), 0.03, Vector3::x()),
-            (Vector3::new(0.0, 0.0, -0.15), 0.03, -Vector3::z()),
-            (Vector3::new(0.0, 0.01, 0.0), -0.01, Vector3::y()),
-        ] {
-            let (dist, point, n) = solid.distance(&q);
-            assert!(
-                (dist - d).abs() < 1e-15 && (n - normal).norm() < 1e-15,
-                "{q}: {dist} {n}"
-            );
-            assert!((point + dist * n - q).norm() < 1e-15, "{q}: {point}");
-        }
-    }
-
-    #[test]
-    fn a_rim_under_a_lying_capsule_has_its_points_at_the_chord_ends() {
-        // a capsule of radius 0.02 lying with its segment 3 cm above the disk: 1 cm above the rim
-        let solid = Solid::Capsule(Segment {
-            half_length: 0.2,
-            radius: 0.02,
-        });
-        assert_chord_ends(&solid, 0.05, (0.03, 0.03), 0.01);
     }
 
     #[test]

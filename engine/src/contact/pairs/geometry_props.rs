@@ -125,12 +125,6 @@ fn solid_unique(point: &Vector3<f64>, solid: &Solid, pose: &GeomPose) -> bool {
             box_unique(point, half_extents, pose) && (depth(k) < 0.0 || q[k].abs() > 1e-2)
         }
         Solid::Hull(hull) => hull_unique(point, hull, pose),
-        // (away from the segment, where the direction to it is undefined)
-        Solid::Capsule(segment) => {
-            let q = pose.rot.transpose() * (point - pose.pos);
-            let z = q.z.clamp(-segment.half_length, segment.half_length);
-            (q - Vector3::new(0.0, 0.0, z)).norm() > 1e-2
-        }
         Solid::Cylinder {
             radius,
             half_length,
