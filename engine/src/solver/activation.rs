@@ -315,8 +315,8 @@ pub(crate) fn ensure_prepared(model: &Model, state: &State, ws: &mut Workspace) 
 /// [`prepare`] for each `(c, frozen)` of `candidates` (its contact frame at `state` with the
 /// feature chosen at the state's predicted poses, as a solve prepares it, or with the held
 /// rim point or edge crossing), then holding `frozen` as the feature its gap at the next poses
-/// is measured with: the one the solve ended with, which [`refreeze_disks`] may have moved. The gradients
-/// linearise a solved step so, also at perturbed states (the features are material: a rim
+/// is measured with: the one the solve ended with, which [`refreeze_disks`] may have moved.
+/// The gradients linearise a solved step so, also at perturbed states (the features are material: a rim
 /// point or a face of the geom). Each geom's poses are computed once per call (a box's corner
 /// candidates share their geom), bit for bit what preparing each candidate alone computes.
 pub(crate) fn prepare_candidates_holding(
@@ -982,18 +982,17 @@ pub(crate) fn refreeze_disks(model: &Model, state: &State, ws: &mut Workspace) -
         }
         n += 1;
         let rim = crate::contact::disk_rim_for_step(contact, &model.geoms, &pa, &pb, true);
-        let (Some(point), Some(frame)) = (rim, rim_frame_point(model, state, c, held)) else {
+        let (Some(point), Some(Frozen::Rim(last) | Frozen::RimFramed { point: last, .. })) =
+            (rim, held)
+        else {
             ws.frozen[c] = rim.map(Frozen::Rim);
             continue;
         };
-        let last = match held {
-            Some(Frozen::Rim(p) | Frozen::RimFramed { point: p, .. }) => p,
-            _ => point,
-        };
+        // (a cylinder against another solid keeps its frame: only disk–plane rims jump)
         let far = match contact.feature {
             Feature::DiskPlane { center_a, .. } => {
                 let across = |p: Vector3<f64>| (p - center_a).dot(&(point - center_a)) < 0.0;
-                across(frame) && across(last)
+                across(last) && rim_frame_point(model, state, c, held).is_some_and(across)
             }
             _ => false,
         };
